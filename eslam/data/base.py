@@ -1,0 +1,143 @@
+"""The sequence protocol every reader implements, and the input checks they share.
+
+Readers convert their dataset's conventions at this boundary: what leaves a reader is
+a :class:`~eslam.types.Frame` with depth in metres (0 = invalid) and camera-to-world
+poses in OpenCV axes. Anything wrong with the input raises
+:class:`~eslam.errors.InputError` naming the file and the fix.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+from PIL import Image, UnidentifiedImageError
+
+from eslam.errors import InputError
+from eslam.types import Frame, Intrinsics
+
+RIGID_TOLERANCE = 1e-3
+"""Largest |R^T R - I| entry (and |det R - 1|) accepted for a ground-truth rotation."""
+
+
+@runtime_checkable
+class RGBDSequence(Protocol):
+    """A finite, indexable sequence of RGB-D frames.
+
+    Attributes:
+        root: the folder the sequence was read from.
+        intrinsics: intrinsics shared by every frame (after the reader's resize/crop).
+    """
+
+    root: Path
+    intrinsics: Intrinsics
+
+    def __len__(self) -> int:
+        """Number of frames."""
+        ...
+
+    def __getitem__(self, index: int) -> Frame:
+        """Frame ``index`` (0-based); reads its images from disk."""
+        ...
+
+    def gt_poses(self) -> np.ndarray | None:
+        """(N, 4, 4) float64 ground-truth camera-to-world poses, or None without ground truth."""
+        ...
+
+
+def iterate_frames(sequence: RGBDSequence) -> Iterator[Frame]:
+    """Yield every frame of ``sequence`` in order."""
+    for index in range(len(sequence)):
+        yield sequence[index]
+
+
+def require_dir(path: Path, what: str) -> Path:
+    """Return ``path`` if it is a folder, else raise an InputError naming ``what`` it should hold."""
+    if not path.exists():
+        raise InputError(path, f"folder not found (expected {what})", "check the --data path")
+    if not path.is_dir():
+        raise InputError(path, f"is not a folder (expected {what})")
+    return path
+
+
+def require_file(path: Path, what: str) -> Path:
+    """Return ``path`` if it is a file, else raise an InputError naming ``what`` it should hold."""
+    if not path.is_file():
+        raise InputError(path, f"file not found (expected {what})")
+    return path
+
+
+def read_rgb(path: Path) -> np.ndarray:
+    """Read a colour image as (H, W, 3) uint8; grey and RGBA images are converted."""
+    try:
+        with Image.open(path) as image:
+            return np.asarray(image.convert("RGB"), dtype=np.uint8).copy()
+    except FileNotFoundError:
+        raise InputError(path, "colour image not found") from None
+    except (UnidentifiedImageError, OSError, SyntaxError, ValueError) as error:
+        raise InputError(path, f"unreadable colour image ({error})", "re-export the image") from None
+
+
+def read_depth(path: Path, depth_scale: float) -> np.ndarray:
+    """Read a 16-bit depth PNG and convert it to metres: depth = value / depth_scale.
+
+    Returns:
+        (H, W) float32 metres, 0 where the file holds 0 (invalid).
+    """
+    try:
+        with Image.open(path) as image:
+            raw = np.asarray(image)
+    except FileNotFoundError:
+        raise InputError(path, "depth image not found") from None
+    except (UnidentifiedImageError, OSError, SyntaxError, ValueError) as error:
+        raise InputError(path, f"unreadable depth image ({error})", "re-export the image") from None
+    if raw.ndim != 2 or raw.dtype.kind not in "ui":
+        raise InputError(
+            path,
+            f"depth must be a single-channel integer image, got shape {raw.shape} {raw.dtype}",
+            "save depth as a 16-bit PNG",
+        )
+    return (raw.astype(np.float32) / np.float32(depth_scale)).astype(np.float32)
+
+
+def check_image_size(path: Path, shape: tuple[int, ...], intrinsics: Intrinsics) -> None:
+    """Raise if an image of ``shape`` does not match the intrinsics' size."""
+    height, width = shape[:2]
+    if (width, height) != intrinsics.size:
+        raise InputError(
+            path,
+            f"image is {width}x{height} but the intrinsics are for "
+            f"{intrinsics.width}x{intrinsics.height}",
+            "fix the camera parameters or the image size",
+        )
+
+
+def check_pose(pose: np.ndarray, source: Path, label: str) -> np.ndarray:
+    """Check that ``pose`` is a finite rigid 4x4 transform; return it as float64.
+
+    Args:
+        pose: (4, 4) camera-to-world matrix.
+        source: the file the pose came from, named in the error.
+        label: where in the file (e.g. "line 12"), named in the error.
+    """
+    pose = np.asarray(pose, dtype=np.float64)
+    if pose.shape != (4, 4):
+        raise InputError(source, f"{label}: pose must be 4x4, got shape {pose.shape}")
+    if not np.all(np.isfinite(pose)):
+        raise InputError(
+            source, f"{label}: pose has non-finite values (nan or inf)", "remove or fix that pose"
+        )
+    rotation = pose[:3, :3]
+    orthogonality = np.abs(rotation.T @ rotation - np.eye(3)).max()
+    determinant = np.linalg.det(rotation)
+    bottom = np.abs(pose[3] - np.array([0.0, 0.0, 0.0, 1.0])).max()
+    if orthogonality > RIGID_TOLERANCE or abs(determinant - 1.0) > RIGID_TOLERANCE or bottom > 0:
+        raise InputError(
+            source,
+            f"{label}: pose is not a rigid transform (|R^T R - I| = {orthogonality:.2g}, "
+            f"det R = {determinant:.4g}, last row {pose[3].tolist()})",
+            "poses must be camera-to-world rotations plus translations",
+        )
+    return pose
