@@ -54,7 +54,7 @@ def iterate_frames(sequence: RGBDSequence) -> Iterator[Frame]:
 
 
 def require_dir(path: Path, what: str) -> Path:
-    """Return ``path`` if it is a folder, else raise an InputError naming ``what`` it should hold."""
+    """Return ``path`` if it is a folder, else raise an InputError saying what it should hold."""
     if not path.exists():
         raise InputError(path, f"folder not found (expected {what})", "check the --data path")
     if not path.is_dir():
@@ -77,7 +77,9 @@ def read_rgb(path: Path) -> np.ndarray:
     except FileNotFoundError:
         raise InputError(path, "colour image not found") from None
     except (UnidentifiedImageError, OSError, SyntaxError, ValueError) as error:
-        raise InputError(path, f"unreadable colour image ({error})", "re-export the image") from None
+        raise InputError(
+            path, f"unreadable colour image ({error})", "re-export the image"
+        ) from None
 
 
 def read_depth(path: Path, depth_scale: float) -> np.ndarray:

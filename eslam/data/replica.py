@@ -60,7 +60,9 @@ def read_cam_params(path: Path) -> tuple[Intrinsics, float]:
         raise InputError(path, f"not valid JSON ({error})") from None
     except (KeyError, TypeError) as error:
         raise InputError(
-            path, f"missing camera field {error}", 'expected {"camera": {"w","h","fx","fy","cx","cy","scale"}}'
+            path,
+            f"missing camera field {error}",
+            'expected {"camera": {"w","h","fx","fy","cx","cy","scale"}}',
         ) from None
     except ValueError as error:
         raise InputError(path, f"invalid camera parameters ({error})") from None
@@ -110,7 +112,9 @@ class ReplicaSequence:
     """
 
     def __init__(self, root: str | Path) -> None:
-        self.root = require_dir(Path(root), "a Replica sequence: results/, traj.txt, cam_params.json")
+        self.root = require_dir(
+            Path(root), "a Replica sequence: results/, traj.txt, cam_params.json"
+        )
         results = require_dir(self.root / "results", "frame*.jpg and depth*.png images")
         self.intrinsics, self.depth_scale = read_cam_params(self.root / "cam_params.json")
         colour = _numbered_files(results, _FRAME_RE)
@@ -206,7 +210,10 @@ def write_replica_sequence(
         )
         units = np.round(np.nan_to_num(frame.depth, nan=0.0) * depth_scale)
         depth = Image.fromarray(np.clip(units, 0, 65535).astype(np.uint16))
-        write_with(results / f"depth{number:06d}.png", lambda tmp, image=depth: image.save(tmp, format="PNG"))
+        write_with(
+            results / f"depth{number:06d}.png",
+            lambda tmp, image=depth: image.save(tmp, format="PNG"),
+        )
         lines.append(" ".join(f"{value:.17g}" for value in frame.pose_gt.reshape(-1)))
     if intrinsics is None:
         raise ValueError("no frames to write")

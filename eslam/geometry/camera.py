@@ -88,18 +88,20 @@ def project_points(
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """Project world points into the image of a camera.
 
+    u = fx * x / z + cx, v = fy * y / z + cy with (x, y, z) = R^T (p - t).
+
     Args:
-        points_world: (N, 3) points.
+        points_world: (..., 3) points.
         c2w: (4, 4) camera-to-world pose.
 
     Returns:
-        uv (N, 2) pixel coordinates and z (N,) depth along the optical axis (points with
+        uv (..., 2) pixel coordinates and z (...) depth along the optical axis (points with
         z <= 0 are behind the camera; their uv is meaningless).
     """
     rotation = c2w[:3, :3]
     points_cam = (points_world - c2w[:3, 3]) @ rotation
-    z = points_cam[:, 2]
-    safe_z = torch.where(z.abs() > 1e-12, z, torch.full_like(z, 1e-12))
-    u = intrinsics.fx * points_cam[:, 0] / safe_z + intrinsics.cx
-    v = intrinsics.fy * points_cam[:, 1] / safe_z + intrinsics.cy
+    z = points_cam[..., 2]
+    safe_z = torch.where(z.abs() > 1e-12, z, torch.copysign(torch.full_like(z, 1e-12), z))
+    u = intrinsics.fx * points_cam[..., 0] / safe_z + intrinsics.cx
+    v = intrinsics.fy * points_cam[..., 1] / safe_z + intrinsics.cy
     return torch.stack((u, v), dim=-1), z
