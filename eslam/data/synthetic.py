@@ -21,6 +21,8 @@ import numpy as np
 
 from eslam.atomic import atomic_directory, write_text
 from eslam.data.replica import REPLICA_DEPTH_SCALE, write_replica_sequence
+from eslam.data.synthetic_materials import random_material
+from eslam.data.synthetic_mesh import scene_mesh, write_mesh_ply
 from eslam.data.synthetic_scene import (
     Box,
     Cylinder,
@@ -28,10 +30,7 @@ from eslam.data.synthetic_scene import (
     RoomBox,
     Scene,
     Sphere,
-    random_material,
     render_view,
-    scene_mesh,
-    write_mesh_ply,
 )
 from eslam.errors import InputError
 from eslam.types import Frame, Intrinsics

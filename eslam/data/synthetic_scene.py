@@ -1,10 +1,12 @@
-"""Analytic scenes for synthetic RGB-D: primitives, textures, exact ray casting, meshes.
+"""Analytic scenes for synthetic RGB-D: primitives and exact ray casting.
 
 A scene is a tuple of primitives (an inward-facing room box, boxes, spheres, vertical
-cylinders), each with a procedural :class:`Material`. Rendering intersects every ray
-with every primitive in closed form and keeps the nearest hit, so depth is exact up to
-float64 rounding; there is no rasteriser. Colour is albedo times a shading term that
-depends only on the surface normal, so it is the same from every viewpoint.
+cylinders), each with a procedural material (:mod:`eslam.data.synthetic_materials`).
+Rendering intersects every ray with every primitive in closed form and keeps the
+nearest hit, so depth is exact up to float64 rounding; there is no rasteriser. Colour
+is albedo times a shading term that depends only on the surface normal, so it is the
+same from every viewpoint. Each primitive also tessellates itself for the ground-truth
+mesh (:mod:`eslam.data.synthetic_mesh`).
 
 World frame: metres, z up, the floor at z = 0. Ray directions come from
 :mod:`eslam.geometry.camera` with unit z in the camera frame, so the ray parameter t
@@ -13,195 +15,28 @@ of a hit IS its depth along the optical axis.
 
 from __future__ import annotations
 
-import colorsys
 import functools
 import math
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Protocol
 
 import numpy as np
 import torch
 
-from eslam.atomic import write_with
+from eslam.data.synthetic_materials import Material, shading
+from eslam.data.synthetic_mesh import (
+    MESH_SPACING,
+    MESH_TOLERANCE,
+    Surface,
+    box_faces,
+    circle_segments,
+    grid_faces,
+    merge_surfaces,
+)
 from eslam.geometry.camera import camera_to_world_rays, pixel_grid, pixels_to_camera_directions
 from eslam.types import Intrinsics
 
-LIGHT_DIRECTION = np.array([0.36, 0.48, 0.8]) / np.linalg.norm([0.36, 0.48, 0.8])
-"""Unit direction towards the (infinitely far) light, world frame."""
-AMBIENT = 0.6
-"""Shading = AMBIENT + (1 - AMBIENT) * (1 + n.l) / 2: never black, view-independent."""
-MESH_TOLERANCE = 2e-4
-"""Largest distance (m) between a curved surface and its ground-truth tessellation."""
-MESH_SPACING = 0.05
-"""Grid spacing (m) of planar and cylindrical faces in the mesh, for vertex colours."""
-PATTERNS = ("checker", "stripes", "rings")
 _BIG = 1e300  # stands in for 1/0 in slab tests
-
-
-@dataclass(frozen=True, eq=False)
-class Material:
-    """A procedural texture: a smooth two-colour gradient with a sharp pattern over it.
-
-    albedo(p) = lerp(low, high, g(p)) * ripple(p), then lerp towards ``accent`` by
-    ``strength`` where the pattern is on; g = (1 + sin(wave.p + phase)) / 2 and
-    ripple = 0.85 + 0.15 sin(ripple.p). The gradients give the colour loss slopes
-    everywhere; the pattern gives edges.
-
-    Attributes:
-        low: (3,) RGB in [0, 1] at one end of the gradient.
-        high: (3,) RGB at the other end.
-        accent: (3,) RGB of the pattern.
-        wave: (3,) wave vector of the gradient, rad/m.
-        ripple: (3,) wave vector of a finer brightness ripple, rad/m.
-        phase: gradient phase, rad.
-        pattern: one of PATTERNS: "checker" (3D lattice of cubes), "stripes"
-            (parallel slabs), "rings" (concentric spherical shells).
-        scale: cell / stripe / ring width, m.
-        vector: checker: lattice offset (m); stripes: unit normal of the slabs;
-            rings: centre (m).
-        strength: how far towards ``accent`` the pattern pulls, in [0, 1].
-    """
-
-    low: np.ndarray
-    high: np.ndarray
-    accent: np.ndarray
-    wave: np.ndarray
-    ripple: np.ndarray
-    phase: float
-    pattern: str
-    scale: float
-    vector: np.ndarray
-    strength: float
-
-    def albedo(self, points: np.ndarray) -> np.ndarray:
-        """(M, 3) RGB in [0, 1] at world ``points`` (M, 3)."""
-        g = 0.5 + 0.5 * np.sin(points @ self.wave + self.phase)
-        base = self.low + g[:, None] * (self.high - self.low)
-        base *= (0.85 + 0.15 * np.sin(points @ self.ripple))[:, None]
-        if self.pattern == "checker":
-            cells = np.floor((points + self.vector) / self.scale).sum(axis=1)
-        elif self.pattern == "stripes":
-            cells = np.floor(points @ self.vector / self.scale)
-        else:
-            cells = np.floor(np.linalg.norm(points - self.vector, axis=1) / self.scale)
-        on = (np.mod(cells, 2.0) * self.strength)[:, None]
-        return base * (1.0 - on) + self.accent * on
-
-
-def _hsv(hue: float, saturation: float, value: float) -> np.ndarray:
-    return np.array(colorsys.hsv_to_rgb(hue % 1.0, min(saturation, 1.0), min(value, 1.0)))
-
-
-def _unit(rng: np.random.Generator) -> np.ndarray:
-    """A random unit vector with every component at least ~0.2: no face sees it edge-on."""
-    vector = rng.uniform(0.35, 1.0, 3) * rng.choice([-1.0, 1.0], 3)
-    return vector / np.linalg.norm(vector)
-
-
-def random_material(
-    rng: np.random.Generator, hue: float, value: float, saturation: float
-) -> Material:
-    """A material whose colours stay near ``hue`` and ``value`` (distinct mean colours)."""
-    pattern = PATTERNS[int(rng.integers(len(PATTERNS)))]
-    scale = rng.uniform(0.08, 0.3)
-    vector = {
-        "checker": rng.uniform(0.0, scale, 3),
-        "stripes": _unit(rng),
-        "rings": rng.uniform(-3.0, 3.0, 3),
-    }[pattern]
-    return Material(
-        low=_hsv(hue, saturation, 0.7 * value),
-        high=_hsv(hue + 0.05, 0.8 * saturation, 1.25 * value),
-        accent=_hsv(hue + rng.choice([-0.1, 0.1]), saturation, rng.choice([0.25, 0.98])),
-        wave=_unit(rng) * 2 * math.pi / rng.uniform(1.0, 3.0),
-        ripple=_unit(rng) * 2 * math.pi / rng.uniform(0.25, 0.6),
-        phase=float(rng.uniform(0.0, 2 * math.pi)),
-        pattern=pattern,
-        scale=float(scale),
-        vector=vector,
-        strength=float(rng.uniform(0.5, 0.75)),
-    )
-
-
-@dataclass(frozen=True, eq=False)
-class Surface:
-    """A triangulated piece of a primitive with exact per-vertex normals.
-
-    Attributes:
-        vertices: (V, 3) float64, m.  faces: (F, 3) int64.  normals: (V, 3) unit.
-        parts: (V,) int64 part index (which face of a box, side or cap of a cylinder).
-    """
-
-    vertices: np.ndarray
-    faces: np.ndarray
-    normals: np.ndarray
-    parts: np.ndarray
-
-    def oriented(self) -> Surface:
-        """The same surface with every triangle wound counter-clockwise about its normal."""
-        tri = self.vertices[self.faces]
-        cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-        flip = np.einsum("fi,fi->f", cross, self.normals[self.faces].sum(axis=1)) < 0
-        faces = np.where(flip[:, None], self.faces[:, ::-1], self.faces)
-        return Surface(self.vertices, faces, self.normals, self.parts)
-
-
-def merge_surfaces(surfaces: list[Surface]) -> Surface:
-    """Concatenate surfaces into one (face indices shifted)."""
-    offsets = np.cumsum([0] + [len(s.vertices) for s in surfaces])
-    return Surface(
-        np.concatenate([s.vertices for s in surfaces]),
-        np.concatenate([s.faces + o for s, o in zip(surfaces, offsets, strict=False)]),
-        np.concatenate([s.normals for s in surfaces]),
-        np.concatenate([s.parts for s in surfaces]),
-    )
-
-
-def _grid_faces(rows: int, cols: int, wrap: bool = False) -> np.ndarray:
-    """Two triangles per cell of a (rows+1) x cols(+1) vertex grid; ``wrap`` closes columns."""
-    width = cols if wrap else cols + 1
-    index = np.arange((rows + 1) * width).reshape(rows + 1, width)
-    right = np.roll(index, -1, axis=1) if wrap else index[:, 1:]
-    left = index if wrap else index[:, :-1]
-    a, b, c, d = left[:-1], right[:-1], right[1:], left[1:]
-    faces = np.concatenate([np.stack([a, b, c], -1), np.stack([a, c, d], -1)])
-    return faces.reshape(-1, 3).astype(np.int64)
-
-
-def _rectangle(corner, edge_u, edge_v, normal, part: int) -> Surface:
-    rows = max(1, math.ceil(np.linalg.norm(edge_u) / MESH_SPACING))
-    cols = max(1, math.ceil(np.linalg.norm(edge_v) / MESH_SPACING))
-    a = np.linspace(0.0, 1.0, rows + 1)[:, None, None]
-    b = np.linspace(0.0, 1.0, cols + 1)[None, :, None]
-    vertices = (np.asarray(corner) + a * edge_u + b * edge_v).reshape(-1, 3)
-    normals = np.broadcast_to(np.asarray(normal, dtype=np.float64), vertices.shape).copy()
-    parts = np.full(len(vertices), part, dtype=np.int64)
-    return Surface(vertices, _grid_faces(rows, cols), normals, parts).oriented()
-
-
-def circle_segments(radius: float, tolerance: float = MESH_TOLERANCE) -> int:
-    """Segments n of a circle polygon with sagitta r (1 - cos(pi / n)) <= tolerance (>= 128)."""
-    return max(128, math.ceil(math.pi / math.acos(1.0 - tolerance / radius)))
-
-
-def _box_faces(lo, hi, skip: tuple[int, ...] = ()) -> list[Surface]:
-    """Faces of the box [lo, hi]; part 2a is the face at lo[a], 2a+1 at hi[a], normals outward."""
-    lo, hi = np.asarray(lo, dtype=np.float64), np.asarray(hi, dtype=np.float64)
-    surfaces = []
-    for axis in range(3):
-        u, v = np.eye(3)[(axis + 1) % 3], np.eye(3)[(axis + 2) % 3]
-        size = hi - lo
-        for side, plane in enumerate((lo[axis], hi[axis])):
-            if 2 * axis + side in skip:
-                continue
-            corner = lo.copy()
-            corner[axis] = plane
-            normal = np.eye(3)[axis] * (1.0 if side else -1.0)
-            surfaces.append(
-                _rectangle(corner, u * (size @ u), v * (size @ v), normal, 2 * axis + side)
-            )
-    return surfaces
 
 
 class Primitive(Protocol):
@@ -272,7 +107,7 @@ class RoomBox:
     def surface(self):
         inward = [
             Surface(s.vertices, s.faces, -s.normals, s.parts).oriented()
-            for s in _box_faces(self.lo, self.hi)
+            for s in box_faces(self.lo, self.hi)
         ]
         return merge_surfaces(inward)
 
@@ -318,7 +153,7 @@ class Box:
         return self.material.albedo(points)
 
     def surface(self):
-        merged = merge_surfaces(_box_faces(-self.half, self.half, self.hidden))
+        merged = merge_surfaces(box_faces(-self.half, self.half, self.hidden))
         return Surface(
             merged.vertices @ self.rotation.T + self.centre,
             merged.faces,
@@ -383,7 +218,7 @@ class Sphere:
         south = np.stack(
             [np.full_like(j, last), last - 2 * n + (j + 1) % (2 * n), last - 2 * n + j], -1
         )
-        faces = np.concatenate([north, _grid_faces(n - 2, 2 * n, wrap=True) + 1, south])
+        faces = np.concatenate([north, grid_faces(n - 2, 2 * n, wrap=True) + 1, south])
         parts = np.zeros(len(unit), dtype=np.int64)
         return Surface(self.centre + self.radius * unit, faces, unit, parts).oriented()
 
@@ -451,7 +286,7 @@ class Cylinder:
         pieces = [
             Surface(
                 side_vertices.reshape(-1, 3),
-                _grid_faces(rows, segments, wrap=True),
+                grid_faces(rows, segments, wrap=True),
                 np.tile(unit, (rows + 1, 1)),
                 np.zeros((rows + 1) * segments, dtype=np.int64),
             ).oriented()
@@ -464,7 +299,7 @@ class Cylinder:
             vertices = np.concatenate([[[*self.centre, height]], ring.reshape(-1, 3)])
             j = np.arange(segments)
             fan = np.stack([np.zeros_like(j), 1 + j, 1 + (j + 1) % segments], -1)
-            faces = np.concatenate([fan, _grid_faces(rings - 1, segments, wrap=True) + 1])
+            faces = np.concatenate([fan, grid_faces(rings - 1, segments, wrap=True) + 1])
             normals = np.broadcast_to([0.0, 0.0, sign], vertices.shape).copy()
             parts = np.full(len(vertices), part, dtype=np.int64)
             pieces.append(Surface(vertices, faces, normals, parts).oriented())
@@ -502,11 +337,6 @@ class RenderedView:
     normals: np.ndarray
     primitive: np.ndarray
     cos_incidence: np.ndarray
-
-
-def shading(normals: np.ndarray) -> np.ndarray:
-    """(M,) view-independent shading factor in [AMBIENT, 1] for unit ``normals`` (M, 3)."""
-    return AMBIENT + (1.0 - AMBIENT) * 0.5 * (1.0 + normals @ LIGHT_DIRECTION)
 
 
 def cast_rays(
@@ -588,43 +418,3 @@ def render_frame(
     """
     view = render_view(scene, intrinsics, c2w)
     return view.rgb, view.depth
-
-
-@dataclass(frozen=True, eq=False)
-class TriangleMesh:
-    """A triangle mesh with vertex colours.
-
-    Attributes:
-        vertices: (V, 3) float64, m.  faces: (F, 3) int64.  colours: (V, 3) uint8.
-    """
-
-    vertices: np.ndarray
-    faces: np.ndarray
-    colours: np.ndarray
-
-
-def scene_mesh(scene: Scene) -> TriangleMesh:
-    """Ground-truth mesh of ``scene`` in its world frame.
-
-    Planar faces are exact; spheres and cylinders are within MESH_TOLERANCE (0.2 mm)
-    of the analytic surfaces. Room faces point into the room, objects' faces outward;
-    faces resting on the floor are left out (never observable). Vertex colours are the
-    rendered colours (albedo times shading) at the vertices.
-    """
-    pieces, colours = [], []
-    for primitive in scene.primitives:
-        surface = primitive.surface()
-        albedo = primitive.albedo(surface.vertices, surface.parts)
-        colours.append(albedo * shading(surface.normals)[:, None])
-        pieces.append(surface)
-    merged = merge_surfaces(pieces)
-    rgb = np.clip(np.concatenate(colours) * 255.0 + 0.5, 0, 255).astype(np.uint8)
-    return TriangleMesh(merged.vertices, merged.faces, rgb)
-
-
-def write_mesh_ply(path: str | Path, mesh: TriangleMesh) -> None:
-    """Write ``mesh`` as a binary PLY with vertex colours (atomically)."""
-    import trimesh
-
-    tm = trimesh.Trimesh(mesh.vertices, mesh.faces, vertex_colors=mesh.colours, process=False)
-    write_with(path, lambda tmp: tm.export(tmp, file_type="ply", encoding="binary"))

@@ -28,15 +28,14 @@ from eslam.data.synthetic import (
     synthetic_intrinsics,
     write_synthetic_sequence,
 )
+from eslam.data.synthetic_mesh import MESH_TOLERANCE, scene_mesh
 from eslam.data.synthetic_scene import (
-    MESH_TOLERANCE,
     Cylinder,
     Scene,
     Sphere,
     cast_rays,
     render_frame,
     render_view,
-    scene_mesh,
 )
 from eslam.errors import InputError
 from eslam.geometry.camera import backproject_depth, pixels_to_camera_directions, project_points

@@ -19,18 +19,17 @@ import inspect
 import itertools
 import json
 import os
-import re
 import textwrap
 import types
 import typing
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal, NamedTuple, TypeVar, Union
 
 import yaml
 
 from eslam.atomic import write_text
+from eslam.config.schema import ESLAMConfig
 from eslam.errors import ConfigError
 
 T = TypeVar("T")
@@ -39,54 +38,6 @@ Origins = dict[tuple[str, ...], str]
 
 COMMAND_LINE = "command line"
 _UNIONS = (Union, types.UnionType)
-
-
-@dataclass
-class DataConfig:
-    """Which sequence to read and how it is laid out on disk."""
-
-    format: str = "replica"
-    """Dataset layout of the sequence folder (e.g. replica); checked by the data layer."""
-    path: str | None = None
-    """Folder of the sequence; `--data PATH` on the command line sets it."""
-
-
-@dataclass
-class SceneConfig:
-    """The region of space the map covers."""
-
-    bound: list[list[float]] | None = None
-    """Scene box [[xmin, xmax], [ymin, ymax], [zmin, zmax]] in metres; null = automatic."""
-
-    def __post_init__(self) -> None:
-        if self.bound is not None and (
-            len(self.bound) != 3 or any(len(p) != 2 or not p[0] < p[1] for p in self.bound)
-        ):
-            raise ValueError(f"bound must be 3 pairs [min, max] with min < max, got {self.bound}")
-
-
-@dataclass
-class ESLAMConfig:
-    """Everything a run needs; saved fully resolved as config.yaml in the run folder."""
-
-    seed: int = 0
-    """Seed of every random generator; the same seed gives the same numbers on CPU."""
-    device: str = "cpu"
-    """Torch device to run on: cpu, cuda, cuda:N or mps."""
-    threads: int = 2
-    """Torch intra-op CPU threads; 0 leaves torch's default."""
-    data: DataConfig = field(default_factory=DataConfig)
-    """The input sequence."""
-    scene: SceneConfig = field(default_factory=SceneConfig)
-    """The mapped region of space."""
-
-    def __post_init__(self) -> None:
-        if self.seed < 0:
-            raise ValueError(f"seed must be >= 0, got {self.seed}")
-        if self.threads < 0:
-            raise ValueError(f"threads must be >= 0 (0 = torch's default), got {self.threads}")
-        if not re.fullmatch(r"cpu|mps|cuda(:\d+)?", self.device):
-            raise ValueError(f"device must be cpu, cuda, cuda:N or mps, got '{self.device}'")
 
 
 class FieldHelp(NamedTuple):

@@ -1,0 +1,27 @@
+"""Typed configuration: the dataclass tree (schema.py) and its strict YAML loader (loader.py)."""
+
+from eslam.config.loader import (
+    COMMAND_LINE,
+    FieldHelp,
+    config_from_dict,
+    config_help,
+    config_to_dict,
+    field_docs,
+    load_config,
+    save_config,
+)
+from eslam.config.schema import DataConfig, ESLAMConfig, SceneConfig
+
+__all__ = [
+    "COMMAND_LINE",
+    "DataConfig",
+    "ESLAMConfig",
+    "FieldHelp",
+    "SceneConfig",
+    "config_from_dict",
+    "config_help",
+    "config_to_dict",
+    "field_docs",
+    "load_config",
+    "save_config",
+]
