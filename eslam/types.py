@@ -10,6 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 import numpy as np
+import torch
 
 
 @dataclass(frozen=True)
@@ -118,3 +119,75 @@ class Frame:
     def valid_depth(self) -> np.ndarray:
         """(H, W) bool mask of pixels with a usable depth (finite and > 0)."""
         return np.isfinite(self.depth) & (self.depth > 0)
+
+
+@dataclass(frozen=True, eq=False)
+class RayBatch:
+    """Rays to render, with what the sensor measured along them.
+
+    Directions are the camera-frame directions with unit z rotated into the world, so
+    a sample at parameter z along a ray lies at depth z along the camera's optical axis.
+
+    Attributes:
+        origins: (N, 3) ray origins (camera centres), world frame, metres.
+        directions: (N, 3) world-frame directions, unit z in the camera frame.
+        depth: (N,) measured depth along the optical axis, metres; 0 = no depth.
+        rgb: (N, 3) measured colour in [0, 1].
+    """
+
+    origins: torch.Tensor
+    directions: torch.Tensor
+    depth: torch.Tensor
+    rgb: torch.Tensor
+
+    def __len__(self) -> int:
+        return self.origins.shape[0]
+
+
+@dataclass(frozen=True, eq=False)
+class FieldOutput:
+    """What the scene field returns for N points.
+
+    Attributes:
+        sdf: (N,) truncated signed distance in units of the truncation T, in [-1, 1].
+        rgb: (N, 3) colour in [0, 1], or None when colour was not asked for.
+    """
+
+    sdf: torch.Tensor
+    rgb: torch.Tensor | None
+
+
+@dataclass(frozen=True, eq=False)
+class RenderOutput:
+    """Volume rendering of a RayBatch with S samples per ray.
+
+    Attributes:
+        depth: (N,) rendered depth, metres.
+        rgb: (N, 3) rendered colour in [0, 1], or None when colour is not rendered.
+        z_vals: (N, S) sample positions along each ray (depth along the optical axis).
+        sdf: (N, S) predicted TSDF at the samples, units of T.
+        weights: (N, S) rendering weights w_i = alpha_i prod_{j<i} (1 - alpha_j).
+    """
+
+    depth: torch.Tensor
+    rgb: torch.Tensor | None
+    z_vals: torch.Tensor
+    sdf: torch.Tensor
+    weights: torch.Tensor
+
+
+@dataclass(frozen=True, eq=False)
+class LossTerms:
+    """The five loss terms (unweighted) and their weighted sum.
+
+    Attributes:
+        free_space, trunc_middle, trunc_tail, depth, colour: scalar tensors, unweighted.
+        total: scalar tensor, the weighted sum that is optimised.
+    """
+
+    free_space: torch.Tensor
+    trunc_middle: torch.Tensor
+    trunc_tail: torch.Tensor
+    depth: torch.Tensor
+    colour: torch.Tensor
+    total: torch.Tensor

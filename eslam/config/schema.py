@@ -6,8 +6,10 @@ must be >= 0, ...") so the loader can name the file that set that field.
 
 from __future__ import annotations
 
+import dataclasses
 import re
 from dataclasses import dataclass, field
+from typing import Literal
 
 
 @dataclass
@@ -35,6 +37,166 @@ class SceneConfig:
 
 
 @dataclass
+class FieldConfig:
+    """The scene representation: feature planes and decoders (method.md section 1)."""
+
+    channels: int = 32
+    """Feature channels of every plane (paper: 32)."""
+    geometry_resolution: tuple[float, float] = (0.24, 0.06)
+    """Cell size (m) of the coarse and fine geometry planes (paper: 24 cm, 6 cm)."""
+    appearance_resolution: tuple[float, float] = (0.24, 0.03)
+    """Cell size (m) of the coarse and fine appearance planes (paper: 24 cm, 3 cm)."""
+    levels: Literal["both", "coarse", "fine"] = "both"
+    """Plane levels used; coarse or fine alone are the ablations b and c (suppl. Tab. 3)."""
+    level_fusion: Literal["concat", "sum"] = "concat"
+    """How the levels combine: concatenation (paper) or sum (ablation d)."""
+    shared_planes: bool = False
+    """One set of planes for geometry and appearance (ablation a); resolution = geometry's."""
+    init_std: float = 0.01
+    """Standard deviation of the normal initialisation of plane features (release)."""
+    decoder_hidden: int = 32
+    """Hidden width of both decoders (paper: 32; release: 16)."""
+    decoder_layers: int = 1
+    """Hidden layers of both decoders (paper: 1; release: 2)."""
+    truncation: float = 0.06
+    """Truncation distance T of the TSDF, metres (paper: 6 cm)."""
+    beta_init: float = 10.0
+    """Initial sharpness beta of the SDF-to-density map (paper and release: 10)."""
+    learn_beta: bool = True
+    """Optimise beta with the decoders (release keeps it fixed at 10 for TUM)."""
+    bound_multiple: float = 0.24
+    """The bound's upper corner grows so each side is a multiple of this (release), metres."""
+    plane_sampling: Literal["fast", "reference"] = "fast"
+    """Plane interpolation: one batched grid_sample per level (fast) or one call per plane."""
+
+    def __post_init__(self) -> None:
+        for name in ("geometry_resolution", "appearance_resolution"):
+            values = getattr(self, name)
+            if len(values) != 2 or min(values) <= 0:
+                raise ValueError(f"{name} must be two positive cell sizes, got {values}")
+        if self.channels <= 0 or self.decoder_hidden <= 0 or self.decoder_layers < 1:
+            raise ValueError("channels, decoder_hidden and decoder_layers must be positive")
+        if self.truncation <= 0 or self.beta_init <= 0 or self.bound_multiple <= 0:
+            raise ValueError("truncation, beta_init and bound_multiple must be positive")
+
+
+@dataclass
+class RenderConfig:
+    """Ray sampling and SDF volume rendering (method.md section 2)."""
+
+    samples_stratified: int = 32
+    """Samples uniform on [0, far_factor * D] per ray with depth (Replica 32; ScanNet, TUM 48)."""
+    samples_surface: int = 8
+    """Samples uniform on [D - band T, D + band T] per ray with depth (paper: 8)."""
+    surface_band: float = 1.5
+    """Half-width of the surface sample interval, in units of the truncation T (release)."""
+    far_factor: float = 1.2
+    """Stratified samples reach far_factor times the measured depth (release: 1.2)."""
+    perturb: bool = True
+    """Jitter samples within their bins while optimising (release)."""
+    samples_no_depth: int = 64
+    """Uniform samples up to the bound's exit for rays without depth (novel views)."""
+    density: Literal["eslam", "bell"] = "eslam"
+    """sigma(s) = beta sigmoid(-beta s) (paper) or the bell weight sigmoid(s/T) sigmoid(-s/T)."""
+    render_colour: bool = True
+    """Render colour; off is ablation f (depth only, no colour loss)."""
+
+    def __post_init__(self) -> None:
+        if self.samples_stratified < 1 or self.samples_surface < 0 or self.samples_no_depth < 1:
+            raise ValueError("samples_stratified must be >= 1 and samples_surface >= 0")
+        if self.surface_band <= 0 or self.far_factor <= 1.0:
+            raise ValueError("surface_band must be > 0 and far_factor > 1")
+
+
+@dataclass
+class LossWeights:
+    """Weights of the five loss terms (method.md section 3)."""
+
+    free_space: float = 5.0
+    """lambda_fs: (s - 1)^2 on samples in front of the truncation band."""
+    trunc_middle: float = 200.0
+    """lambda_Tm: (z + s T - D)^2 on samples with |z - D| < 0.4 T."""
+    trunc_tail: float = 10.0
+    """lambda_Tt: the same residual on samples with 0.4 T <= |z - D| <= T."""
+    depth: float = 0.1
+    """lambda_d: (rendered depth - D)^2 per ray."""
+    colour: float = 5.0
+    """lambda_c: ||rendered colour - C||^2 per ray."""
+
+
+@dataclass
+class LossConfig:
+    """How the loss terms are formed, shared by tracking and mapping."""
+
+    middle_fraction: float = 0.4
+    """|z - D| below this fraction of T is the truncation middle (paper: 0.4)."""
+    single_band: bool = False
+    """One loss (with the middle weight) for the whole truncation band: ablation g."""
+    reduction: Literal["per_ray", "points"] = "per_ray"
+    """SDF terms averaged per ray then over rays (paper) or over all points (release)."""
+
+
+@dataclass
+class TrackingConfig:
+    """Camera tracking, once per frame (method.md section 4; Replica values)."""
+
+    iterations: int = 8
+    """Optimisation steps per frame (Replica 8, ScanNet 30, TUM 200)."""
+    rays: int = 2000
+    """Rays sampled per step (Replica and ScanNet 2000, TUM 5000)."""
+    lr_translation: float = 0.001
+    """Adam learning rate of the translation (paper, Replica; release 0.002)."""
+    lr_rotation: float = 0.001
+    """Adam learning rate of the quaternion (paper, Replica)."""
+    adam_betas: tuple[float, float] = (0.5, 0.999)
+    """Adam betas of the pose optimiser (release)."""
+    border: int = 75
+    """Pixels at the image border never sampled (release: 75 Replica and ScanNet, 20 TUM)."""
+    outlier_factor: float = 10.0
+    """Rays whose depth residual exceeds this times the batch median are dropped (release)."""
+    constant_velocity: bool = True
+    """Start from the constant-velocity prediction on SE(3); off starts from the last pose."""
+    weights: LossWeights = field(default_factory=lambda: LossWeights(10.0, 200.0, 50.0, 1.0, 5.0))
+    """Loss weights while tracking (paper: 10, 200, 50, 1, 5)."""
+
+
+@dataclass
+class MappingConfig:
+    """Joint optimisation of map and keyframe poses (method.md section 5; Replica values)."""
+
+    every: int = 4
+    """Map every k-th frame (plus the last); every mapped frame becomes a keyframe."""
+    window: int = 20
+    """Keyframes optimised together: current, two latest, the rest drawn from the list."""
+    selection: Literal["random", "overlap"] = "random"
+    """Window policy: random over all keyframes (paper) or over overlapping ones (release)."""
+    rays: int = 4000
+    """Rays per step in total over the window, split evenly (Replica 4000, TUM 5000)."""
+    iterations: int = 15
+    """Optimisation steps per mapped frame (Replica 15, ScanNet 30, TUM 60)."""
+    first_iterations: int = 1000
+    """Steps on the first frame (release: 1000)."""
+    first_lr_factor: float = 5.0
+    """Learning-rate multiplier for the first frame (release: 5)."""
+    lr_decoders: float = 0.001
+    """Adam learning rate of the decoders and beta (paper)."""
+    lr_planes: float = 0.005
+    """Adam learning rate of the feature planes (paper)."""
+    lr_poses: float = 0.001
+    """Adam learning rate of the window's keyframe poses (paper)."""
+    optimise_poses: bool = True
+    """Refine keyframe poses with the map (paper's BA); off is ablation h."""
+    keyframe_device: str | None = None
+    """Device holding keyframe images (uint8 colour, 16-bit depth); null = the run's device."""
+    weights: LossWeights = field(default_factory=LossWeights)
+    """Loss weights while mapping (paper: 5, 200, 10, 0.1, 5)."""
+
+    def __post_init__(self) -> None:
+        if self.every < 1 or self.window < 3 or self.rays < 1 or self.iterations < 0:
+            raise ValueError("every must be >= 1, window >= 3, rays >= 1, iterations >= 0")
+
+
+@dataclass
 class ESLAMConfig:
     """Everything a run needs; saved fully resolved as config.yaml in the run folder."""
 
@@ -44,10 +206,20 @@ class ESLAMConfig:
     """Torch device to run on: cpu, cuda, cuda:N or mps."""
     threads: int = 2
     """Torch intra-op CPU threads; 0 leaves torch's default."""
-    data: DataConfig = field(default_factory=DataConfig)
+    data: DataConfig = dataclasses.field(default_factory=DataConfig)
     """The input sequence."""
-    scene: SceneConfig = field(default_factory=SceneConfig)
+    scene: SceneConfig = dataclasses.field(default_factory=SceneConfig)
     """The mapped region of space."""
+    field: FieldConfig = dataclasses.field(default_factory=FieldConfig)
+    """Feature planes and decoders."""
+    render: RenderConfig = dataclasses.field(default_factory=RenderConfig)
+    """Ray sampling and volume rendering."""
+    loss: LossConfig = dataclasses.field(default_factory=LossConfig)
+    """How the loss terms are formed."""
+    tracking: TrackingConfig = dataclasses.field(default_factory=TrackingConfig)
+    """Camera tracking."""
+    mapping: MappingConfig = dataclasses.field(default_factory=MappingConfig)
+    """Mapping and keyframes."""
 
     def __post_init__(self) -> None:
         if self.seed < 0:
