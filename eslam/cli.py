@@ -74,6 +74,51 @@ def _command_inspect(args: argparse.Namespace) -> int:
     return 0
 
 
+def _print_metrics(result) -> None:
+    print(f"run folder: {result.run_dir}")
+    for key, value in result.metrics.items():
+        shown = f"{value:.4f}" if isinstance(value, float) else str(value)
+        print(f"  {key:<16} {shown}")
+
+
+def _command_run(args: argparse.Namespace) -> int:
+    from eslam.config import load_config
+    from eslam.io.run_dir import default_run_name, prepare_run_directory
+    from eslam.slam.loop import run_slam
+
+    overrides = list(args.overrides)
+    if args.data is not None:
+        overrides.append(f"data.path={args.data}")
+    if args.device is not None:
+        overrides.append(f"device={args.device}")
+    config = load_config(args.config, overrides)
+    out = Path(args.out) if args.out else Path(default_run_name(args.config))
+    run = prepare_run_directory(out, overwrite=args.overwrite)
+    _print_metrics(run_slam(config, run.root))
+    return 0
+
+
+def _command_resume(args: argparse.Namespace) -> int:
+    from eslam.config import load_config
+    from eslam.errors import InputError
+    from eslam.io.run_dir import RunDirectory
+    from eslam.slam.loop import run_slam
+
+    run = RunDirectory(Path(args.run_dir))
+    if not run.map.is_file():
+        raise InputError(run.map, "not found: nothing to resume", "start the run with `eslam run`")
+    config = load_config(run.config)
+    _print_metrics(run_slam(config, run.root, resume=True))
+    return 0
+
+
+def _command_demo(args: argparse.Namespace) -> int:
+    from eslam.slam.demo import run_demo
+
+    _print_metrics(run_demo(Path(args.out), tuple(args.overrides)))
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The ``eslam`` argument parser with every sub-command."""
     parser = _Parser(
@@ -133,6 +178,45 @@ def build_parser() -> argparse.ArgumentParser:
         "--format", choices=sorted(DATASETS), default="replica", help="dataset layout"
     )
     inspect.set_defaults(handler=_command_inspect)
+
+    run = commands.add_parser(
+        "run",
+        help="run ESLAM on a sequence and write a run folder",
+        description=(
+            "Track every frame and map every k-th; write config.yaml, trajectory.txt "
+            "(TUM), trajectory_gt.txt, map.pt, mesh.ply, metrics.json and timings.json. "
+            "Settings are `key.sub=value` overrides of CONFIG (see configs/base.yaml)."
+        ),
+    )
+    run.add_argument(
+        "config", metavar="CONFIG", help="YAML config (e.g. configs/replica/room0.yaml)"
+    )
+    run.add_argument("overrides", nargs="*", metavar="key=value", help="config overrides")
+    run.add_argument("--data", help="sequence folder (sets data.path)")
+    run.add_argument("--out", help="run folder (default runs/NAME-TIME)")
+    run.add_argument("--device", help="cpu, cuda or cuda:N (sets device)")
+    run.add_argument("--overwrite", action="store_true", help="reuse an existing run folder")
+    run.set_defaults(handler=_command_run)
+
+    resume = commands.add_parser(
+        "resume",
+        help="continue an interrupted run from its map.pt",
+        description="Continue the run in RUN_DIR from its last checkpoint (map.pt).",
+    )
+    resume.add_argument("run_dir", metavar="RUN_DIR", help="folder of the interrupted run")
+    resume.set_defaults(handler=_command_resume)
+
+    demo = commands.add_parser(
+        "demo",
+        help="synthetic scene, end to end: generate, run, evaluate (a few minutes on CPU)",
+        description=(
+            "Write a 60-frame synthetic room to OUT/data, run ESLAM with the CPU preset "
+            "(configs/demo.yaml) to OUT/run and print the metrics."
+        ),
+    )
+    demo.add_argument("--out", default="out/demo", help="output folder (default out/demo)")
+    demo.add_argument("overrides", nargs="*", metavar="key=value", help="config overrides")
+    demo.set_defaults(handler=_command_demo)
     return parser
 
 

@@ -10,14 +10,32 @@ from eslam.config.loader import (
     load_config,
     save_config,
 )
-from eslam.config.schema import DataConfig, ESLAMConfig, SceneConfig
+from eslam.config.schema import (
+    DataConfig,
+    ESLAMConfig,
+    FieldConfig,
+    LossConfig,
+    LossWeights,
+    MappingConfig,
+    OutputConfig,
+    RenderConfig,
+    SceneConfig,
+    TrackingConfig,
+)
 
 __all__ = [
     "COMMAND_LINE",
     "DataConfig",
     "ESLAMConfig",
+    "FieldConfig",
     "FieldHelp",
+    "LossConfig",
+    "LossWeights",
+    "MappingConfig",
+    "OutputConfig",
+    "RenderConfig",
     "SceneConfig",
+    "TrackingConfig",
     "config_from_dict",
     "config_help",
     "config_to_dict",

@@ -97,13 +97,15 @@ class RenderConfig:
     samples_no_depth: int = 64
     """Uniform samples up to the bound's exit for rays without depth (novel views)."""
     density: Literal["eslam", "bell"] = "eslam"
-    """sigma(s) = beta sigmoid(-beta s) (paper) or the bell weight sigmoid(s/T) sigmoid(-s/T)."""
+    """eslam: sigma = beta sigmoid(-beta s) (paper); bell: w ~ sigmoid(beta s) sigmoid(-beta s)."""
     render_colour: bool = True
     """Render colour; off is ablation f (depth only, no colour loss)."""
 
     def __post_init__(self) -> None:
-        if self.samples_stratified < 1 or self.samples_surface < 0 or self.samples_no_depth < 1:
-            raise ValueError("samples_stratified must be >= 1 and samples_surface >= 0")
+        if self.samples_stratified < 1 or self.samples_surface < 0 or self.samples_no_depth < 2:
+            raise ValueError(
+                "samples_stratified must be >= 1, samples_surface >= 0, samples_no_depth >= 2"
+            )
         if self.surface_band <= 0 or self.far_factor <= 1.0:
             raise ValueError("surface_band must be > 0 and far_factor > 1")
 
@@ -197,6 +199,24 @@ class MappingConfig:
 
 
 @dataclass
+class OutputConfig:
+    """What a run writes besides the trajectory (design.md, run directory)."""
+
+    checkpoint_every: int = 20
+    """Save map.pt (everything needed to resume) every this many frames, and at the end."""
+    mesh: bool = True
+    """Extract mesh.ply from the field at the end of the run."""
+    mesh_resolution: float = 0.02
+    """Marching-cubes grid step of mesh.ply, metres (paper evaluation: 1 cm Replica/TUM)."""
+    progress: bool = True
+    """Show a progress bar (frames/s, current ATE when ground truth exists)."""
+
+    def __post_init__(self) -> None:
+        if self.checkpoint_every < 1 or self.mesh_resolution <= 0:
+            raise ValueError("checkpoint_every must be >= 1 and mesh_resolution > 0")
+
+
+@dataclass
 class ESLAMConfig:
     """Everything a run needs; saved fully resolved as config.yaml in the run folder."""
 
@@ -220,6 +240,8 @@ class ESLAMConfig:
     """Camera tracking."""
     mapping: MappingConfig = dataclasses.field(default_factory=MappingConfig)
     """Mapping and keyframes."""
+    output: OutputConfig = dataclasses.field(default_factory=OutputConfig)
+    """Checkpoints, mesh and progress display."""
 
     def __post_init__(self) -> None:
         if self.seed < 0:

@@ -20,9 +20,10 @@ from pathlib import Path
 import numpy as np
 
 from eslam.atomic import atomic_directory, write_text
+from eslam.data.mesh_io import write_mesh_ply
 from eslam.data.replica import REPLICA_DEPTH_SCALE, write_replica_sequence
 from eslam.data.synthetic_materials import random_material
-from eslam.data.synthetic_mesh import scene_mesh, write_mesh_ply
+from eslam.data.synthetic_mesh import scene_mesh
 from eslam.data.synthetic_scene import (
     Box,
     Cylinder,
@@ -321,6 +322,31 @@ def describe_scene(scene: Scene) -> list[dict]:
     return lines
 
 
+BOUND_MARGIN = 0.1
+"""Margin (m) around the room box in the scene bound written to synth.json."""
+
+
+def scene_bound(scene: Scene, margin: float = BOUND_MARGIN) -> list[list[float]]:
+    """[[xmin, xmax], [ymin, ymax], [zmin, zmax]] of the room box grown by ``margin`` metres."""
+    room = next(p for p in scene.primitives if isinstance(p, RoomBox))
+    return [
+        [float(lo) - margin, float(hi) + margin] for lo, hi in zip(room.lo, room.hi, strict=True)
+    ]
+
+
+def read_synthetic_bound(root: str | Path) -> list[list[float]]:
+    """The scene bound recorded in ``root/synth.json`` by :func:`write_synthetic_sequence`."""
+    path = Path(root) / "synth.json"
+    try:
+        return json.loads(path.read_text(encoding="utf-8"))["bound"]
+    except FileNotFoundError:
+        raise InputError(path, "not found (is this a folder written by `eslam synth`?)") from None
+    except (KeyError, json.JSONDecodeError) as error:
+        raise InputError(
+            path, f"has no scene bound ({error})", "rewrite it with `eslam synth`"
+        ) from None
+
+
 def write_synthetic_sequence(
     out_dir: str | Path, config: SynthConfig, overwrite: bool = False
 ) -> Path:
@@ -345,6 +371,7 @@ def write_synthetic_sequence(
                 "world": "metres, z up, floor at z = 0; poses camera-to-world, OpenCV axes",
                 "mesh": "mesh.ply",
                 "scene": describe_scene(scene),
+                "bound": scene_bound(scene),
             }
             write_text(staging / "synth.json", json.dumps(info, indent=2) + "\n")
     except FileExistsError as error:

@@ -3,7 +3,7 @@
 Primitives (:mod:`eslam.data.synthetic_scene`) build their triangulated surfaces from
 the helpers here (:class:`Surface`, grids, rectangles, box faces, circle segment
 counts); :func:`scene_mesh` gathers them into one vertex-coloured
-:class:`TriangleMesh` in the world frame and :func:`write_mesh_ply` saves it. Curved
+:class:`~eslam.data.mesh_io.TriangleMesh` in the world frame. Curved
 surfaces stay within MESH_TOLERANCE of the exact ones.
 """
 
@@ -11,12 +11,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 
-from eslam.atomic import write_with
+from eslam.data.mesh_io import TriangleMesh
 from eslam.data.synthetic_materials import shading
 
 if TYPE_CHECKING:
@@ -108,19 +107,6 @@ def box_faces(lo, hi, skip: tuple[int, ...] = ()) -> list[Surface]:
     return surfaces
 
 
-@dataclass(frozen=True, eq=False)
-class TriangleMesh:
-    """A triangle mesh with vertex colours.
-
-    Attributes:
-        vertices: (V, 3) float64, m.  faces: (F, 3) int64.  colours: (V, 3) uint8.
-    """
-
-    vertices: np.ndarray
-    faces: np.ndarray
-    colours: np.ndarray
-
-
 def scene_mesh(scene: Scene) -> TriangleMesh:
     """Ground-truth mesh of ``scene`` in its world frame.
 
@@ -138,11 +124,3 @@ def scene_mesh(scene: Scene) -> TriangleMesh:
     merged = merge_surfaces(pieces)
     rgb = np.clip(np.concatenate(colours) * 255.0 + 0.5, 0, 255).astype(np.uint8)
     return TriangleMesh(merged.vertices, merged.faces, rgb)
-
-
-def write_mesh_ply(path: str | Path, mesh: TriangleMesh) -> None:
-    """Write ``mesh`` as a binary PLY with vertex colours (atomically)."""
-    import trimesh
-
-    tm = trimesh.Trimesh(mesh.vertices, mesh.faces, vertex_colors=mesh.colours, process=False)
-    write_with(path, lambda tmp: tm.export(tmp, file_type="ply", encoding="binary"))

@@ -1,0 +1,1 @@
+"""Metrics on arrays and files only: never imports the field or the renderer."""

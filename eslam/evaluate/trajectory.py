@@ -1,0 +1,135 @@
+"""Absolute trajectory error (ATE) after Umeyama alignment (method.md section 6)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Alignment:
+    """x_aligned = scale * rotation @ x + translation."""
+
+    rotation: np.ndarray
+    translation: np.ndarray
+    scale: float
+
+    def apply(self, points: np.ndarray) -> np.ndarray:
+        """Align (N, 3) points."""
+        return self.scale * points @ self.rotation.T + self.translation
+
+
+@dataclass(frozen=True)
+class ATEResult:
+    """ATE statistics in metres over ``pairs`` matched positions."""
+
+    rmse: float
+    mean: float
+    median: float
+    max: float
+    pairs: int
+    alignment: Alignment
+    errors: np.ndarray
+
+    def as_cm(self) -> dict[str, float]:
+        """The statistics in centimetres, with the keys metrics.json uses."""
+        return {"ate_rmse_cm": 100 * self.rmse, "ate_mean_cm": 100 * self.mean}
+
+
+def umeyama_alignment(
+    source: np.ndarray, target: np.ndarray, with_scale: bool = False
+) -> Alignment:
+    """Least-squares similarity (or rigid) transform taking ``source`` onto ``target``.
+
+    Umeyama, "Least-squares estimation of transformation parameters between two point
+    patterns", TPAMI 1991: with centred point sets X (source) and Y (target) and the SVD
+    of the cross-covariance Sigma = Y^T X / n = U D V^T, R = U S V^T (S fixes a reflection),
+    c = trace(D S) / var(X) (1 without scale), t = mean(Y) - c R mean(X).
+
+    Args:
+        source: (N, 3) estimated positions.
+        target: (N, 3) ground-truth positions.
+    """
+    if source.shape != target.shape or source.ndim != 2 or source.shape[1] != 3:
+        raise ValueError(f"need two (N, 3) arrays, got {source.shape} and {target.shape}")
+    if len(source) < 3:
+        raise ValueError(f"need at least 3 positions to align, got {len(source)}")
+    mean_source, mean_target = source.mean(axis=0), target.mean(axis=0)
+    centred_source, centred_target = source - mean_source, target - mean_target
+    covariance = centred_target.T @ centred_source / len(source)
+    u, d, vt = np.linalg.svd(covariance)
+    s = np.eye(3)
+    if np.linalg.det(u) * np.linalg.det(vt) < 0:
+        s[2, 2] = -1.0
+    rotation = u @ s @ vt
+    scale = 1.0
+    if with_scale:
+        variance = (centred_source**2).sum() / len(source)
+        scale = float(np.trace(np.diag(d) @ s) / variance)
+    translation = mean_target - scale * rotation @ mean_source
+    return Alignment(rotation=rotation, translation=translation, scale=scale)
+
+
+def absolute_trajectory_error(
+    estimated: np.ndarray, ground_truth: np.ndarray, with_scale: bool = False
+) -> ATEResult:
+    """ATE of camera positions after aligning ``estimated`` onto ``ground_truth``.
+
+    Args:
+        estimated: (N, 3) positions or (N, 4, 4) camera-to-world poses.
+        ground_truth: the same shape, matched row by row. Rows where either is not
+            finite are left out (e.g. ScanNet's invalid poses).
+    """
+    est = estimated[:, :3, 3] if estimated.ndim == 3 else estimated
+    gt = ground_truth[:, :3, 3] if ground_truth.ndim == 3 else ground_truth
+    keep = np.isfinite(est).all(axis=1) & np.isfinite(gt).all(axis=1)
+    est, gt = est[keep].astype(np.float64), gt[keep].astype(np.float64)
+    alignment = umeyama_alignment(est, gt, with_scale)
+    errors = np.linalg.norm(alignment.apply(est) - gt, axis=1)
+    return ATEResult(
+        rmse=float(np.sqrt(np.mean(errors**2))),
+        mean=float(errors.mean()),
+        median=float(np.median(errors)),
+        max=float(errors.max()),
+        pairs=len(errors),
+        alignment=alignment,
+        errors=errors,
+    )
+
+
+def associate_timestamps(
+    first: np.ndarray, second: np.ndarray, max_difference: float = 0.01
+) -> tuple[np.ndarray, np.ndarray]:
+    """Match two sorted timestamp lists one-to-one, nearest first (TUM's associate.py rule).
+
+    Candidate pairs closer than ``max_difference`` seconds are taken in order of
+    increasing time difference, each timestamp used at most once.
+
+    Returns:
+        Index arrays (into ``first`` and ``second``) of the matched pairs, sorted by ``first``.
+    """
+    order = np.argsort(second)
+    sorted_second = second[order]
+    candidates = []
+    for i, t in enumerate(first):
+        lo = np.searchsorted(sorted_second, t - max_difference, side="left")
+        hi = np.searchsorted(sorted_second, t + max_difference, side="right")
+        for j in range(lo, hi):
+            difference = abs(sorted_second[j] - t)
+            if difference < max_difference:
+                candidates.append((difference, i, int(order[j])))
+    candidates.sort()
+    used_first: set[int] = set()
+    used_second: set[int] = set()
+    pairs = []
+    for _, i, j in candidates:
+        if i not in used_first and j not in used_second:
+            used_first.add(i)
+            used_second.add(j)
+            pairs.append((i, j))
+    pairs.sort()
+    if not pairs:
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    index = np.array(pairs, dtype=np.int64)
+    return index[:, 0], index[:, 1]

@@ -1,0 +1,328 @@
+"""Multi-scale axis-aligned feature planes (method.md section 1).
+
+Coordinates: a world point p (metres) inside the scene bound [b_min, b_max] maps to
+p_n = 2 (p - b_min) / (b_max - b_min) - 1 in [-1, 1]^3. Each level of a plane set holds
+three planes, laid out as in the release:
+
+    xy: (C, ny, nx) sampled at (x, y)
+    xz: (C, nz, nx) sampled at (x, z)
+    yz: (C, nz, ny) sampled at (y, z)
+
+A level's three planes live in ONE parameter tensor of shape (3, C, Hmax, Wmax), each
+plane in the top-left corner ``[i, :, :h_i, :w_i]`` and zeros beyond (the padding gets
+no gradient). This lets the fast path sample all three planes in one batched
+``grid_sample`` call; the reference path slices each plane out and samples it alone.
+Both read the same parameters, and tests/field/test_planes.py holds them equal.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import Literal
+
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+PLANE_AXES: tuple[tuple[int, int], ...] = ((0, 1), (0, 2), (1, 2))
+"""Point coordinates (W axis, H axis) each plane of a level is sampled at: xy, xz, yz."""
+
+ROUNDING_TOLERANCE = 1e-4
+"""Slack (in cells) when dividing an extent by a cell size, so that 4.8 / 0.24 is 20
+cells and not 19 or 21 after float rounding; also makes :func:`fit_bound` idempotent."""
+
+PlaneShapes = tuple[tuple[int, int], ...]
+"""The true (height, width) of the xy, xz and yz planes of a level."""
+
+
+def fit_bound(bound: torch.Tensor, multiple: float) -> torch.Tensor:
+    """Grow the bound's upper corner so each side is a multiple of ``multiple`` (release).
+
+    b_max' = b_min + ceil((b_max - b_min) / multiple) * multiple; a side that already is
+    a multiple (up to :data:`ROUNDING_TOLERANCE` cells) keeps its length.
+
+    Args:
+        bound: (3, 2) [[xmin, xmax], [ymin, ymax], [zmin, zmax]], metres, min < max.
+        multiple: side length quantum, metres (release: 0.24).
+
+    Returns:
+        (3, 2) the fitted bound, same dtype and device as ``bound``.
+
+    Example:
+        [[0, 1], [0, 0.5], [-1, 1]] with 0.24 -> [[0, 1.2], [0, 0.72], [-1, 1.16]].
+    """
+    _check_bound(bound)
+    if multiple <= 0:
+        raise ValueError(f"multiple must be positive, got {multiple}")
+    low = bound[:, 0].double()
+    cells = torch.ceil((bound[:, 1].double() - low) / multiple - ROUNDING_TOLERANCE)
+    high = low + cells.clamp(min=1) * multiple
+    return torch.stack((low, high), dim=1).to(bound)
+
+
+def normalize_points(points: torch.Tensor, bound: torch.Tensor) -> torch.Tensor:
+    """Map world points into the bound's normalised cube (method.md section 1, release).
+
+    p_n = 2 (p - b_min) / (b_max - b_min) - 1; inside the bound p_n is in [-1, 1].
+
+    Args:
+        points: (N, 3) world coordinates, metres.
+        bound: (3, 2) scene box, metres.
+
+    Returns:
+        (N, 3) normalised coordinates, dtype of ``points``.
+    """
+    if points.ndim != 2 or points.shape[1] != 3:
+        raise ValueError(f"points must be (N, 3), got {tuple(points.shape)}")
+    bound = bound.to(points)
+    return 2.0 * (points - bound[:, 0]) / (bound[:, 1] - bound[:, 0]) - 1.0
+
+
+def grid_size(bound: torch.Tensor, resolution: float) -> tuple[int, int, int]:
+    """Vertices per axis (nx, ny, nz) = int(extent / resolution) (method.md section 1).
+
+    At least 2 per axis, so that every axis is resolved even by a cell size larger than
+    the bound (a case the release does not guard).
+
+    Args:
+        bound: (3, 2) fitted scene box, metres.
+        resolution: cell size, metres.
+
+    Example:
+        extents 4.8 x 2.4 x 2.4 m at 0.24 m -> (20, 10, 10).
+    """
+    _check_bound(bound)
+    extent = (bound[:, 1].double() - bound[:, 0].double()).tolist()
+    nx, ny, nz = (max(2, math.floor(e / resolution + ROUNDING_TOLERANCE)) for e in extent)
+    return nx, ny, nz
+
+
+def plane_shapes(grid: Sequence[int]) -> PlaneShapes:
+    """The (height, width) of the xy, xz, yz planes for a grid of (nx, ny, nz) vertices."""
+    nx, ny, nz = grid
+    return (ny, nx), (nz, nx), (nz, ny)
+
+
+def _plane_coordinates(points_n: torch.Tensor) -> torch.Tensor:
+    """(3, N, 2) the (W, H) grid coordinates of each plane of a level."""
+    return torch.stack([points_n[:, axes] for axes in PLANE_AXES])
+
+
+def sample_planes_reference(
+    planes: torch.Tensor, shapes: PlaneShapes, points_n: torch.Tensor
+) -> torch.Tensor:
+    """Sum of the bilinear features of a level's three planes: one grid_sample per plane.
+
+    The slow, readable reference of :func:`sample_planes_fast` (release semantics):
+    bilinear, align_corners=True (p_n = -1 and +1 are the first and last vertex), border
+    padding (points outside the bound read the border).
+
+    Args:
+        planes: (3, C, Hmax, Wmax) a level's padded planes; plane i is
+            ``planes[i, :, :h_i, :w_i]``.
+        shapes: the true (h_i, w_i) of the three planes.
+        points_n: (N, 3) normalised coordinates.
+
+    Returns:
+        (N, C) the feature sum f_xy(x, y) + f_xz(x, z) + f_yz(y, z).
+    """
+    coords = _plane_coordinates(points_n)
+    total = None
+    for i, (h, w) in enumerate(shapes):
+        plane = planes[i, :, :h, :w].unsqueeze(0)
+        sampled = F.grid_sample(
+            plane,
+            coords[i].view(1, 1, -1, 2).to(plane.dtype),
+            mode="bilinear",
+            padding_mode="border",
+            align_corners=True,
+        )
+        feature = sampled[0, :, 0, :].transpose(0, 1)
+        total = feature if total is None else total + feature
+    return total
+
+
+class _MaskGradient(torch.autograd.Function):
+    """Identity whose backward zeroes the gradient where ``padding`` is True."""
+
+    @staticmethod
+    def forward(ctx, tensor: torch.Tensor, padding: torch.Tensor) -> torch.Tensor:
+        ctx.save_for_backward(padding)
+        return tensor.view_as(tensor)
+
+    @staticmethod
+    def backward(ctx, grad: torch.Tensor) -> tuple[torch.Tensor, None]:
+        (padding,) = ctx.saved_tensors
+        return grad.masked_fill(padding, 0), None
+
+
+def _clamp_border(coords: torch.Tensor) -> torch.Tensor:
+    """Clamp to [-1, 1] with the gradient of grid_sample's border padding.
+
+    grid_sample counts a coordinate ON the border as outside (zero gradient), while
+    ``torch.clamp`` passes the gradient there; this matches grid_sample exactly.
+    """
+    inside = (coords > -1) & (coords < 1)
+    return torch.where(inside, coords, coords.detach().clamp(-1.0, 1.0))
+
+
+def padding_mask(shapes: PlaneShapes, height: int, width: int, device=None) -> torch.Tensor:
+    """(3, 1, Hmax, Wmax) bool, True on the padding beyond each plane's true extent."""
+    mask = torch.ones(3, 1, height, width, dtype=torch.bool, device=device)
+    for i, (h, w) in enumerate(shapes):
+        mask[i, :, :h, :w] = False
+    return mask
+
+
+def grid_scale(shapes: PlaneShapes, height: int, width: int, device=None) -> torch.Tensor:
+    """(3, 1, 2) per plane ((w - 1) / (Wmax - 1), (h - 1) / (Hmax - 1)), float64.
+
+    The factor that shrinks a plane's [-1, 1] onto its true extent inside the padded
+    (Hmax, Wmax) tensor; 1 where the padded size is 1 (then the plane's size is 1 too).
+    """
+    rows = [
+        [(w - 1) / (width - 1) if width > 1 else 1.0, (h - 1) / (height - 1) if height > 1 else 1.0]
+        for h, w in shapes
+    ]
+    return torch.tensor(rows, dtype=torch.float64, device=device).view(3, 1, 2)
+
+
+def sample_planes_fast(
+    planes: torch.Tensor,
+    shapes: PlaneShapes,
+    points_n: torch.Tensor,
+    padding: torch.Tensor | None = None,
+    scale: torch.Tensor | None = None,
+) -> torch.Tensor:
+    """:func:`sample_planes_reference` in ONE batched grid_sample call (batch = 3 planes).
+
+    Border padding with align_corners=True is a clamp of the coordinates to [-1, 1];
+    then each plane's [-1, 1] is rescaled onto its true extent inside the padded tensor:
+    g' = (g + 1) (w - 1) / (Wmax - 1) - 1, and the same along the height.
+
+    Args:
+        planes: (3, C, Hmax, Wmax) a level's padded planes.
+        shapes: the true (h_i, w_i) of the three planes.
+        points_n: (N, 3) normalised coordinates.
+        padding: optional (3, 1, Hmax, Wmax) bool from :func:`padding_mask`; its entries
+            get exactly zero gradient (without it, float rounding at the upper border can
+            leak a ~1e-7 share of the gradient into the padding).
+        scale: optional (3, 1, 2) from :func:`grid_scale` (computed when None).
+
+    Returns:
+        (N, C) the feature sum of the three planes.
+    """
+    if padding is not None and planes.requires_grad:
+        planes = _MaskGradient.apply(planes, padding)
+    if scale is None:
+        scale = grid_scale(shapes, planes.shape[2], planes.shape[3], planes.device)
+    scale = scale.to(planes.dtype)
+    coords = _clamp_border(_plane_coordinates(points_n).to(planes.dtype))
+    grid = (coords + 1.0) * scale - 1.0
+    sampled = F.grid_sample(
+        planes, grid.unsqueeze(1), mode="bilinear", padding_mode="border", align_corners=True
+    )
+    return sampled.sum(dim=0)[:, 0, :].transpose(0, 1)
+
+
+class PlaneLevel(nn.Module):
+    """One level of a plane set: the xy, xz and yz planes of one resolution.
+
+    Attributes:
+        planes: (3, C, Hmax, Wmax) parameter; plane i is ``planes[i, :, :h_i, :w_i]``,
+            initialised normal(0, init_std) (release), zero padding beyond.
+        shapes: the true (h, w) of the xy, xz, yz planes.
+        fast: sample with :func:`sample_planes_fast` (else the reference).
+    """
+
+    def __init__(self, grid: Sequence[int], channels: int, init_std: float, fast: bool = True):
+        """Planes for a grid of (nx, ny, nz) vertices with ``channels`` features each."""
+        super().__init__()
+        self.grid = tuple(int(n) for n in grid)
+        self.shapes = plane_shapes(self.grid)
+        self.fast = fast
+        height = max(h for h, _ in self.shapes)
+        width = max(w for _, w in self.shapes)
+        planes = torch.zeros(3, channels, height, width)
+        for i, (h, w) in enumerate(self.shapes):
+            planes[i, :, :h, :w].normal_(0.0, init_std)
+        self.planes = nn.Parameter(planes)
+        self.register_buffer("padding", padding_mask(self.shapes, height, width), persistent=False)
+        self.register_buffer("scale", grid_scale(self.shapes, height, width), persistent=False)
+
+    @property
+    def channels(self) -> int:
+        """Features per plane, C."""
+        return self.planes.shape[1]
+
+    def numel_used(self) -> int:
+        """Learnable plane entries, padding excluded: C (nx ny + nx nz + ny nz)."""
+        return self.channels * sum(h * w for h, w in self.shapes)
+
+    def sample(self, points_n: torch.Tensor) -> torch.Tensor:
+        """(N, 3) normalised points -> (N, C) sum of the three planes' bilinear features."""
+        if self.fast:
+            return sample_planes_fast(self.planes, self.shapes, points_n, self.padding, self.scale)
+        return sample_planes_reference(self.planes, self.shapes, points_n)
+
+    def extra_repr(self) -> str:
+        return f"grid={self.grid}, channels={self.channels}, fast={self.fast}"
+
+
+LEVEL_NAMES = ("coarse", "fine")
+
+
+class PlaneSet(nn.Module):
+    """A set of planes (geometry or appearance): coarse and/or fine level (method.md 1).
+
+    levels "both" with fusion "concat" (paper): [coarse sum, fine sum] -> 2C features;
+    fusion "sum" (ablation d): coarse sum + fine sum -> C; levels "coarse" or "fine"
+    (ablations b, c): that level alone -> C.
+    """
+
+    def __init__(
+        self,
+        bound: torch.Tensor,
+        resolution: Sequence[float],
+        channels: int,
+        init_std: float,
+        levels: Literal["both", "coarse", "fine"] = "both",
+        fusion: Literal["concat", "sum"] = "concat",
+        fast: bool = True,
+    ):
+        """Planes over the fitted (3, 2) ``bound`` with (coarse, fine) cell sizes in metres."""
+        super().__init__()
+        if levels not in ("both", *LEVEL_NAMES):
+            raise ValueError(f"levels must be both, coarse or fine, got {levels!r}")
+        if fusion not in ("concat", "sum"):
+            raise ValueError(f"level_fusion must be concat or sum, got {fusion!r}")
+        self.fusion = fusion
+        names = LEVEL_NAMES if levels == "both" else (levels,)
+        self.levels = nn.ModuleDict(
+            {
+                name: PlaneLevel(grid_size(bound, res), channels, init_std, fast)
+                for name, res in zip(LEVEL_NAMES, resolution, strict=True)
+                if name in names
+            }
+        )
+        concat = fusion == "concat" and len(self.levels) > 1
+        self.out_dim = channels * (len(self.levels) if concat else 1)
+
+    def features(self, points_n: torch.Tensor) -> torch.Tensor:
+        """(N, 3) normalised points -> (N, out_dim) features, levels coarse then fine."""
+        per_level = [level.sample(points_n) for level in self.levels.values()]
+        if self.fusion == "sum":
+            return sum(per_level[1:], per_level[0])
+        return torch.cat(per_level, dim=-1)
+
+    def numel_used(self) -> int:
+        """Learnable plane entries of all levels, padding excluded."""
+        return sum(level.numel_used() for level in self.levels.values())
+
+
+def _check_bound(bound: torch.Tensor) -> None:
+    if bound.shape != (3, 2):
+        raise ValueError(f"bound must be (3, 2) [[xmin, xmax], ...], got {tuple(bound.shape)}")
+    if not bool((bound[:, 1] > bound[:, 0]).all()):
+        raise ValueError(f"bound must have min < max on every axis, got {bound.tolist()}")

@@ -1,0 +1,129 @@
+"""The scene field: feature planes + tiny MLP decoders (method.md section 1).
+
+TSDF s(p) = tanh(MLP_g(F_g(p_n))) in units of the truncation T, colour
+c(p) = sigmoid(MLP_a(F_a(p_n))), with p_n the point normalised by the fitted bound and
+F_g, F_a the geometry and appearance plane features (:mod:`eslam.field.planes`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+import torch
+from torch import nn
+
+from eslam.config import FieldConfig
+from eslam.field.decoders import appearance_decoder, geometry_decoder
+from eslam.field.planes import PlaneSet, fit_bound, normalize_points
+from eslam.types import FieldOutput
+
+
+class SceneField(nn.Module):
+    """Hybrid scene representation: two plane sets and two decoders, plus beta.
+
+    Attributes:
+        config: the :class:`FieldConfig` it was built from.
+        bound: (3, 2) buffer, the FITTED scene box (upper corner grown to multiples of
+            ``config.bound_multiple``), metres; float32 unless the module is converted.
+            It is in the state_dict, so a loaded field rebuilds the same grids.
+        truncation: T, metres.
+        beta: scalar parameter, sharpness of the SDF-to-density map (init
+            ``config.beta_init``; requires_grad = ``config.learn_beta``).
+        geometry: geometry planes (:class:`PlaneSet`).
+        appearance: appearance planes, or None when ``config.shared_planes`` (then the
+            colour decoder reads the geometry features; ablation a).
+        geometry_decoder: features -> TSDF in [-1, 1] (tanh).
+        appearance_decoder: features -> RGB in [0, 1] (sigmoid).
+    """
+
+    def __init__(self, config: FieldConfig, bound: torch.Tensor):
+        """Build planes over ``bound`` fitted to ``config.bound_multiple``.
+
+        Args:
+            config: plane and decoder settings.
+            bound: (3, 2) [[xmin, xmax], [ymin, ymax], [zmin, zmax]], metres; any float
+                dtype or device (the field is built on the CPU; move it with ``.to``).
+        """
+        super().__init__()
+        self.config = config
+        fitted = fit_bound(torch.as_tensor(bound).detach().cpu().double(), config.bound_multiple)
+        self.register_buffer("bound", fitted.float())
+        self.truncation = float(config.truncation)
+        fast = config.plane_sampling == "fast"
+        common = dict(
+            channels=config.channels,
+            init_std=config.init_std,
+            levels=config.levels,
+            fusion=config.level_fusion,
+            fast=fast,
+        )
+        self.geometry = PlaneSet(fitted, config.geometry_resolution, **common)
+        self.appearance = (
+            None
+            if config.shared_planes
+            else PlaneSet(fitted, config.appearance_resolution, **common)
+        )
+        colour_planes = self.geometry if self.appearance is None else self.appearance
+        hidden, layers = config.decoder_hidden, config.decoder_layers
+        self.geometry_decoder = geometry_decoder(self.geometry.out_dim, hidden, layers)
+        self.appearance_decoder = appearance_decoder(colour_planes.out_dim, hidden, layers)
+        self.beta = nn.Parameter(
+            torch.tensor(float(config.beta_init)), requires_grad=config.learn_beta
+        )
+
+    @classmethod
+    def from_state(cls, config: FieldConfig, state: Mapping[str, torch.Tensor]) -> SceneField:
+        """A field rebuilt from ``state_dict()`` output (on the CPU, float32).
+
+        Raises:
+            KeyError: ``state`` has no ``bound``.
+            RuntimeError: the parameters do not match ``config`` (shapes, names).
+        """
+        if "bound" not in state:
+            raise KeyError("field state has no 'bound' entry (not a SceneField state_dict?)")
+        field = cls(config, state["bound"])
+        field.load_state_dict(state)
+        return field
+
+    def query(self, points: torch.Tensor, with_rgb: bool = True) -> FieldOutput:
+        """The field at world points.
+
+        Args:
+            points: (N, 3) world coordinates, metres. Points outside the bound read
+                the planes' border features.
+            with_rgb: also decode colour.
+
+        Returns:
+            FieldOutput with sdf (N,) TSDF in [-1, 1] (units of T; metric SDF = sdf * T)
+            and rgb (N, 3) in [0, 1], or None when ``with_rgb`` is False.
+        """
+        if points.ndim != 2 or points.shape[1] != 3:
+            raise ValueError(f"points must be (N, 3), got {tuple(points.shape)}")
+        points_n = normalize_points(points.to(self.beta.dtype), self.bound)
+        geometry = self.geometry.features(points_n)
+        sdf = self.geometry_decoder(geometry)[:, 0]
+        if not with_rgb:
+            return FieldOutput(sdf=sdf, rgb=None)
+        colour = geometry if self.appearance is None else self.appearance.features(points_n)
+        return FieldOutput(sdf=sdf, rgb=self.appearance_decoder(colour))
+
+    def plane_parameters(self) -> list[nn.Parameter]:
+        """The plane tensors, geometry then appearance, coarse then fine."""
+        sets = [self.geometry] if self.appearance is None else [self.geometry, self.appearance]
+        return [level.planes for planes in sets for level in planes.levels.values()]
+
+    def decoder_parameters(self) -> list[nn.Parameter]:
+        """Both decoders' weights and biases, plus beta when it is learnt."""
+        params = [*self.geometry_decoder.parameters(), *self.appearance_decoder.parameters()]
+        return [*params, self.beta] if self.beta.requires_grad else params
+
+    def parameter_count(self) -> int:
+        """Learnable scalars: plane entries (padding excluded), decoders, beta if learnt.
+
+        For the paper's settings the planes dominate: C (nx ny + nx nz + ny nz) per level.
+        """
+        planes = self.geometry.numel_used()
+        if self.appearance is not None:
+            planes += self.appearance.numel_used()
+        decoders = sum(p.numel() for p in self.decoder_parameters())
+        return planes + decoders

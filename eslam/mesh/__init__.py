@@ -1,0 +1,1 @@
+"""Meshes from the learned field: marching cubes over observed space."""

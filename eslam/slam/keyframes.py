@@ -1,0 +1,360 @@
+"""Keyframes: a compact image store, and the policies choosing the mapping window.
+
+Every mapped frame becomes a keyframe (method.md section 5). The store keeps colour
+as uint8 and depth as uint16 with :data:`DEPTH_UNITS_PER_METRE` units per metre, i.e.
+5 bytes a pixel: 500 keyframes of 1200 x 680 take 500 * 680 * 1200 * 5 bytes = 2.0 GB
+on the store's device (``mapping.keyframe_device``; put them on the CPU when the GPU is
+short of memory). Buffers grow by doubling, so while growing from C to 2C keyframes
+the old and new buffers coexist for a moment (3C keyframes' worth); pass ``capacity``
+when the count is known in advance to avoid it.
+
+The window policies are small frozen dataclasses whose only state is their settings;
+their randomness comes from the ``torch.Generator`` passed to ``select``, so a seeded
+run draws the same windows every time.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+import torch
+
+from eslam.config import MappingConfig
+from eslam.geometry.camera import pixels_to_camera_directions
+from eslam.types import Frame, Intrinsics
+
+DEPTH_UNITS_PER_METRE = 5000.0
+"""Stored depth units per metre: 0.2 mm steps (error <= 0.1 mm), at most 65535 / 5000
+= 13.107 m. Farther depths are stored as 0 (invalid) and counted in
+``KeyframeStore.far_depth_pixels``: storing them clipped at 13.1 m would put a false
+surface there. RGB-D sensors and our datasets stay well below (Replica <= 10 m)."""
+_MAX_DEPTH_CODE = 65535
+_MIN_VISIBLE_DEPTH = 1e-6  # metres; points closer (or behind) are not in view
+
+
+class KeyframeStore:
+    """Keyframe images (compressed), their frame indices and refined poses.
+
+    Args:
+        intrinsics: the camera of every keyframe.
+        device: where the images and poses live.
+        capacity: keyframes to allocate room for at first (grows by doubling).
+        depth_units_per_metre: depth quantisation (default :data:`DEPTH_UNITS_PER_METRE`).
+
+    Attributes:
+        intrinsics: the camera.
+        device: the store's device.
+        depth_units_per_metre: stored depth units per metre.
+        far_depth_pixels: depth pixels beyond the storable range, stored as invalid.
+    """
+
+    def __init__(
+        self,
+        intrinsics: Intrinsics,
+        device: torch.device | str = "cpu",
+        capacity: int = 16,
+        depth_units_per_metre: float = DEPTH_UNITS_PER_METRE,
+    ) -> None:
+        if capacity < 1:
+            raise ValueError(f"capacity must be >= 1, got {capacity}")
+        if not depth_units_per_metre > 0:
+            raise ValueError(f"depth_units_per_metre must be > 0, got {depth_units_per_metre}")
+        self.intrinsics = intrinsics
+        self.device = torch.device(device)
+        self.depth_units_per_metre = float(depth_units_per_metre)
+        self.far_depth_pixels = 0
+        self._count = 0
+        self._frame_indices: list[int] = []
+        self._rgb, self._depth, self._poses = self._allocate(capacity)
+
+    def _allocate(self, capacity: int) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        h, w = self.intrinsics.height, self.intrinsics.width
+        return (
+            torch.empty((capacity, h, w, 3), dtype=torch.uint8, device=self.device),
+            torch.empty((capacity, h, w), dtype=torch.uint16, device=self.device),
+            torch.full((capacity, 4, 4), float("nan"), dtype=torch.float32, device=self.device),
+        )
+
+    def _reserve(self, needed: int) -> None:
+        """Make room for ``needed`` keyframes, at least doubling (amortised O(1) add)."""
+        if needed <= self.capacity:
+            return
+        rgb, depth, poses = self._allocate(max(needed, 2 * self.capacity))
+        n = self._count
+        rgb[:n] = self._rgb[:n]
+        depth[:n] = self._depth[:n]
+        poses[:n] = self._poses[:n]
+        self._rgb, self._depth, self._poses = rgb, depth, poses
+
+    def __len__(self) -> int:
+        return self._count
+
+    @property
+    def capacity(self) -> int:
+        """Keyframes the current buffers hold before they grow."""
+        return self._rgb.shape[0]
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes held by the buffers (capacity, not just the keyframes stored)."""
+        return sum(t.element_size() * t.nelement() for t in (self._rgb, self._depth, self._poses))
+
+    @property
+    def poses(self) -> torch.Tensor:
+        """(K, 4, 4) float32 camera-to-world poses on the store's device (a view)."""
+        return self._poses[: self._count]
+
+    @property
+    def frame_indices(self) -> tuple[int, ...]:
+        """Sequence index of the frame behind each keyframe."""
+        return tuple(self._frame_indices)
+
+    def _check_id(self, k: int) -> int:
+        if not 0 <= k < self._count:
+            raise IndexError(f"keyframe {k} out of range (the store holds {self._count})")
+        return k
+
+    def _encode_depth(self, depth: np.ndarray) -> torch.Tensor:
+        metres = np.nan_to_num(depth.astype(np.float64), nan=0.0, posinf=0.0, neginf=0.0)
+        codes = np.rint(metres * self.depth_units_per_metre)
+        far = codes > _MAX_DEPTH_CODE
+        self.far_depth_pixels += int(far.sum())
+        codes[far | (codes < 0)] = 0
+        return torch.from_numpy(codes.astype(np.uint16))
+
+    def add(self, frame: Frame, pose: torch.Tensor | np.ndarray) -> int:
+        """Store ``frame`` with its (4, 4) camera-to-world ``pose``; return its keyframe id.
+
+        Depth is quantised to 1 / depth_units_per_metre (nearest); NaN, infinite,
+        negative and too-far depths become 0 (invalid).
+        """
+        h, w = self.intrinsics.height, self.intrinsics.width
+        if frame.rgb.shape != (h, w, 3) or frame.depth.shape != (h, w):
+            raise ValueError(
+                f"frame {frame.index} is {frame.depth.shape[1]}x{frame.depth.shape[0]}, "
+                f"the keyframes are {w}x{h}"
+            )
+        pose = self._check_pose(pose)
+        k = self._count
+        self._reserve(k + 1)
+        self._rgb[k] = torch.from_numpy(np.ascontiguousarray(frame.rgb)).to(self.device)
+        self._depth[k] = self._encode_depth(frame.depth).to(self.device)
+        self._poses[k] = pose
+        self._frame_indices.append(int(frame.index))
+        self._count = k + 1
+        return k
+
+    def _check_pose(self, pose: torch.Tensor | np.ndarray) -> torch.Tensor:
+        pose = torch.as_tensor(pose).detach().to(device=self.device, dtype=torch.float32)
+        if pose.shape != (4, 4) or not bool(torch.isfinite(pose).all()):
+            raise ValueError(f"pose must be a finite (4, 4) matrix, got shape {tuple(pose.shape)}")
+        return pose
+
+    def set_pose(self, k: int, pose: torch.Tensor | np.ndarray) -> None:
+        """Replace the pose of keyframe ``k`` (the mapper's refinement)."""
+        self._poses[self._check_id(k)] = self._check_pose(pose)
+
+    def rgb(self, k: int, device: torch.device | str | None = None) -> torch.Tensor:
+        """(H, W, 3) float32 colour in [0, 1] of keyframe ``k`` on ``device`` (default: store's)."""
+        image = self._rgb[self._check_id(k)].to(self.device if device is None else device)
+        return image.to(torch.float32) / 255.0
+
+    def depth(self, k: int, device: torch.device | str | None = None) -> torch.Tensor:
+        """(H, W) float32 depth in metres of keyframe ``k`` (0 = invalid) on ``device``."""
+        codes = self._depth[self._check_id(k)].to(self.device if device is None else device)
+        return codes.to(torch.float32) / self.depth_units_per_metre
+
+    def state_dict(self) -> dict:
+        """Compact CPU copies of the keyframes (tensors and plain numbers only).
+
+        Loads with ``torch.load(weights_only=True)``; see :meth:`from_state_dict`.
+        """
+        n = self._count
+        return {
+            "rgb": self._rgb[:n].to("cpu", copy=True),
+            "depth": self._depth[:n].to("cpu", copy=True),
+            "poses": self._poses[:n].to("cpu", copy=True),
+            "frame_indices": torch.tensor(self._frame_indices, dtype=torch.int64),
+            "intrinsics": dataclasses.asdict(self.intrinsics),
+            "depth_units_per_metre": self.depth_units_per_metre,
+            "far_depth_pixels": self.far_depth_pixels,
+        }
+
+    @classmethod
+    def from_state_dict(cls, state: dict, device: torch.device | str = "cpu") -> KeyframeStore:
+        """Rebuild a store saved by :meth:`state_dict` on ``device``.
+
+        Raises:
+            KeyError: a missing entry.
+            ValueError: entries whose shapes disagree with each other or the camera.
+        """
+        intrinsics = Intrinsics(**state["intrinsics"])
+        rgb, depth, poses = state["rgb"], state["depth"], state["poses"]
+        indices = state["frame_indices"]
+        n, h, w = len(indices), intrinsics.height, intrinsics.width
+        expected = {"rgb": (n, h, w, 3), "depth": (n, h, w), "poses": (n, 4, 4)}
+        for name, tensor in (("rgb", rgb), ("depth", depth), ("poses", poses)):
+            if tuple(tensor.shape) != expected[name]:
+                raise ValueError(
+                    f"keyframe {name} has shape {tuple(tensor.shape)}, expected {expected[name]}"
+                )
+        store = cls(intrinsics, device, max(n, 1), float(state["depth_units_per_metre"]))
+        store._rgb[:n] = rgb.to(store.device, torch.uint8)
+        store._depth[:n] = depth.to(store.device, torch.uint16)
+        store._poses[:n] = poses.to(store.device, torch.float32)
+        store._frame_indices = [int(i) for i in indices]
+        store._count = n
+        store.far_depth_pixels = int(state["far_depth_pixels"])
+        return store
+
+
+class WindowStrategy(Protocol):
+    """Chooses the keyframes optimised together when a frame is mapped."""
+
+    size: int
+
+    def select(
+        self, store: KeyframeStore, current: int, generator: torch.Generator | None = None
+    ) -> list[int]:
+        """Sorted keyframe ids of the window; always holds ``current`` and the two latest."""
+        ...
+
+
+def _required(count: int, current: int) -> list[int]:
+    """``current`` and the two latest other keyframes (fewer when there are fewer)."""
+    if not 0 <= current < count:
+        raise IndexError(f"keyframe {current} out of range (the store holds {count})")
+    latest = [k for k in range(count - 1, -1, -1) if k != current][:2]
+    return [current, *latest]
+
+
+def _draw(pool: list[int], count: int, generator: torch.Generator | None) -> list[int]:
+    """``count`` items of ``pool`` drawn at random without replacement (all if fewer)."""
+    if count <= 0:
+        return []
+    if count >= len(pool):
+        return list(pool)
+    device = generator.device if generator is not None else "cpu"
+    order = torch.randperm(len(pool), generator=generator, device=device)[:count]
+    return [pool[i] for i in order.tolist()]
+
+
+@dataclass(frozen=True)
+class RandomWindow:
+    """The paper's window: the current keyframe, the two latest keyframes, and the rest
+    (up to ``size`` in all) drawn uniformly without replacement from all other keyframes.
+
+    Attributes:
+        size: keyframes in the window, >= 3 (paper: 20).
+    """
+
+    size: int = 20
+
+    def __post_init__(self) -> None:
+        if self.size < 3:
+            raise ValueError(f"window size must be >= 3 (current and two latest), got {self.size}")
+
+    def select(
+        self, store: KeyframeStore, current: int, generator: torch.Generator | None = None
+    ) -> list[int]:
+        """Sorted keyframe ids of the window (all keyframes when there are at most ``size``)."""
+        required = _required(len(store), current)
+        pool = [k for k in range(len(store)) if k not in required]
+        return sorted(required + _draw(pool, self.size - len(required), generator))
+
+
+@dataclass(frozen=True)
+class OverlapWindow:
+    """The release's window: like :class:`RandomWindow`, but the random part is drawn
+    only among keyframes that see part of what the current keyframe sees.
+
+    Overlap test: ``samples`` pixels with valid depth are drawn from the current
+    keyframe, back-projected with its pose, and projected into every other keyframe;
+    a keyframe overlaps when more than ``min_overlap`` of the points land inside its
+    image in front of its camera (occlusion is ignored). The default 0 keeps any
+    overlap at all, as the NICE-SLAM / ESLAM releases do. When the current keyframe
+    has no valid depth, every keyframe counts as overlapping.
+
+    Attributes:
+        size: keyframes in the window, >= 3.
+        samples: pixels of the current keyframe projected into the others.
+        min_overlap: fraction of those points a keyframe must see, in [0, 1).
+    """
+
+    size: int = 20
+    samples: int = 256
+    min_overlap: float = 0.0
+
+    def __post_init__(self) -> None:
+        if self.size < 3:
+            raise ValueError(f"window size must be >= 3 (current and two latest), got {self.size}")
+        if self.samples < 1 or not 0.0 <= self.min_overlap < 1.0:
+            raise ValueError("samples must be >= 1 and min_overlap in [0, 1)")
+
+    def overlap_fractions(
+        self,
+        store: KeyframeStore,
+        current: int,
+        keyframes: list[int],
+        generator: torch.Generator | None = None,
+    ) -> torch.Tensor | None:
+        """Fraction of the sampled points each of ``keyframes`` sees.
+
+        Returns:
+            (len(keyframes),) float32 fractions in [0, 1] on the store's device, or None
+            when the current keyframe has no valid depth.
+        """
+        intrinsics = store.intrinsics
+        depth = store.depth(current).reshape(-1)
+        valid = torch.nonzero(depth > 0).squeeze(1)
+        if len(valid) == 0:
+            return None
+        device = generator.device if generator is not None else "cpu"
+        pick = torch.randperm(len(valid), generator=generator, device=device)[: self.samples]
+        pixels = valid[pick.to(valid.device)]
+        uv = torch.stack((pixels % intrinsics.width, pixels // intrinsics.width), dim=-1)
+        directions = pixels_to_camera_directions(uv.to(torch.float32), intrinsics)
+        points_cam = directions * depth[pixels].unsqueeze(-1)
+        c2w = store.poses[current]
+        points = points_cam @ c2w[:3, :3].T + c2w[:3, 3]
+        poses = store.poses[keyframes]
+        # Row-vector form of R^T (p - t) for every keyframe at once: (K, P, 3).
+        local = (points.unsqueeze(0) - poses[:, None, :3, 3]) @ poses[:, :3, :3]
+        z = local[..., 2]
+        safe_z = torch.where(z > _MIN_VISIBLE_DEPTH, z, torch.ones_like(z))
+        u = intrinsics.fx * local[..., 0] / safe_z + intrinsics.cx
+        v = intrinsics.fy * local[..., 1] / safe_z + intrinsics.cy
+        inside = (
+            (z > _MIN_VISIBLE_DEPTH)
+            & (u >= -0.5)
+            & (u < intrinsics.width - 0.5)
+            & (v >= -0.5)
+            & (v < intrinsics.height - 0.5)
+        )
+        return inside.to(torch.float32).mean(dim=1)
+
+    def select(
+        self, store: KeyframeStore, current: int, generator: torch.Generator | None = None
+    ) -> list[int]:
+        """Sorted keyframe ids: current, two latest, the rest drawn among overlapping ones."""
+        required = _required(len(store), current)
+        pool = [k for k in range(len(store)) if k not in required]
+        remaining = self.size - len(required)
+        if remaining > 0 and pool:
+            fractions = self.overlap_fractions(store, current, pool, generator)
+            if fractions is not None:
+                keep = (fractions > self.min_overlap).tolist()
+                pool = [k for k, kept in zip(pool, keep, strict=True) if kept]
+        return sorted(required + _draw(pool, remaining, generator))
+
+
+def make_window_strategy(config: MappingConfig) -> RandomWindow | OverlapWindow:
+    """The window policy ``config.selection`` names, of ``config.window`` keyframes."""
+    if config.selection == "random":
+        return RandomWindow(config.window)
+    if config.selection == "overlap":
+        return OverlapWindow(config.window)
+    raise ValueError(f"selection must be 'random' or 'overlap', got '{config.selection}'")
