@@ -223,7 +223,15 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``eslam`` console script; returns the exit status."""
     parser = build_parser()
-    args = parser.parse_args(argv)
+    # key=value overrides may follow options (`run CONFIG --data X key=value`), which
+    # argparse cannot match to a positional list once it has been consumed: collect them.
+    args, extra = parser.parse_known_args(argv)
+    if extra:
+        overridable = hasattr(args, "overrides")
+        bad = [item for item in extra if not overridable or item.startswith("-") or "=" not in item]
+        if bad:
+            parser.error(f"unrecognized arguments: {' '.join(bad)}")
+        args.overrides = [*args.overrides, *extra]
     try:
         return int(args.handler(args))
     except ESLAMError as error:

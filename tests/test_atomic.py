@@ -73,3 +73,22 @@ def test_empty_existing_directory_is_fine(tmp_path: Path) -> None:
     with atomic_directory(tmp_path / "run") as staging:
         (staging / "x").write_text("1")
     assert (tmp_path / "run" / "x").exists()
+
+
+def test_written_files_get_ordinary_permissions(tmp_path: Path) -> None:
+    import os
+
+    write_text(tmp_path / "a.txt", "x")
+    mask = os.umask(0)
+    os.umask(mask)
+    assert (tmp_path / "a.txt").stat().st_mode & 0o777 == 0o666 & ~mask
+
+
+def test_published_directory_gets_ordinary_permissions(tmp_path: Path) -> None:
+    import os
+
+    with atomic_directory(tmp_path / "run") as staging:
+        (staging / "x").write_text("1")
+    mask = os.umask(0)
+    os.umask(mask)
+    assert (tmp_path / "run").stat().st_mode & 0o777 == 0o777 & ~mask

@@ -42,6 +42,7 @@ def test_no_command_is_one_line_error(capsys: pytest.CaptureFixture[str]) -> Non
         (["--size", "4x4"], "size must be at least 8x8"),
         (["--frames", "0"], "expected a positive integer, got '0'"),
         (["--scene", "castle"], "invalid choice: 'castle'"),
+        (["seed=3"], "unrecognized arguments: seed=3"),
     ],
 )
 def test_synth_bad_arguments(

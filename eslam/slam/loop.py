@@ -89,13 +89,25 @@ def run_slam(
     sequence = open_sequence(config.data.format, config.data.path)
     run = RunDirectory(Path(run_dir))
     run.root.mkdir(parents=True, exist_ok=True)
-    if resume:
-        state = load_state(run.map, config, device)
-    else:
-        save_config(config, run.config)
-        state = initial_state(config, sequence, device)
-    _process(config, sequence, state, run, device, stop_after)
-    return _finish(config, sequence, state, run, device)
+    handler = logging.FileHandler(run.log, mode="a", encoding="utf-8")
+    handler.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(message)s"))
+    log.addHandler(handler)
+    log.setLevel(logging.INFO)
+    try:
+        if resume:
+            state = load_state(run.map, config, device)
+            log.info("resuming %s at frame %d", config.data.path, state.next_frame)
+        else:
+            save_config(config, run.config)
+            state = initial_state(config, sequence, device)
+            log.info("run on %s: %d frames, device %s", config.data.path, len(sequence), device)
+        _process(config, sequence, state, run, device, stop_after)
+        result = _finish(config, sequence, state, run, device)
+        log.info("metrics %s", result.metrics)
+        return result
+    finally:
+        log.removeHandler(handler)
+        handler.close()
 
 
 def _process(
@@ -141,6 +153,7 @@ def _process(
         progress.update(index, state.poses[: index + 1])
         if state.next_frame % config.output.checkpoint_every == 0 or state.next_frame == end:
             save_state(run.map, state)
+            log.info("checkpoint after frame %d", index)
     progress.close()
 
 
@@ -173,6 +186,7 @@ def _map(
         lr_factor=config.mapping.first_lr_factor if first else 1.0,
         generator=state.generator,
     )
+    log.info("mapped frame %d: window %s, loss %.5f", index, list(window), result.loss)
     for k, pose, moved in zip(window, result.poses, optimise, strict=True):
         if moved:
             store.set_pose(k, pose)
