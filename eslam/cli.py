@@ -71,10 +71,11 @@ def _command_synth(args: argparse.Namespace) -> int:
 
 
 def _command_inspect(args: argparse.Namespace) -> int:
+    from eslam.config import DataConfig
     from eslam.data import open_sequence
     from eslam.data.inspect import inspect_sequence
 
-    sequence = open_sequence(args.format, args.path)
+    sequence = open_sequence(DataConfig(format=args.format, path=args.path))
     print(inspect_sequence(sequence).to_text())
     return 0
 

@@ -20,6 +20,37 @@ class DataConfig:
     """Dataset layout of the sequence folder (e.g. replica); checked by the data layer."""
     path: str | None = None
     """Folder of the sequence; `--data PATH` on the command line sets it."""
+    start: int = 0
+    """First frame to use (0-based position in the folder's frame order); `--start`."""
+    stride: int = 1
+    """Use every stride-th frame from `start` on; `--stride`."""
+    max_frames: int | None = None
+    """Use at most this many frames (after start and stride); null = all; `--max-frames`."""
+    depth_scale: float | None = None
+    """Depth image units per metre; null = the layout's own (Replica 6553.5 or its
+    cam_params.json, ScanNet and 7-Scenes 1000, TUM 5000, folder: its intrinsics file)."""
+    resize: tuple[int, int] | None = None
+    """Resize colour and depth to [width, height] before cropping; null = the layout's
+    default (TUM 512x384 as the release, others none). Intrinsics follow."""
+    crop: int | None = None
+    """Pixels removed on every border after resizing; null = the layout's default
+    (ScanNet 10, TUM 8, others 0). Intrinsics follow."""
+    camera: str | None = None
+    """TUM only: fr1, fr2 or fr3 (intrinsics and distortion); null = from the folder name."""
+
+    def __post_init__(self) -> None:
+        if self.start < 0:
+            raise ValueError(f"start must be >= 0, got {self.start}")
+        if self.stride < 1:
+            raise ValueError(f"stride must be >= 1, got {self.stride}")
+        if self.max_frames is not None and self.max_frames < 1:
+            raise ValueError(f"max_frames must be >= 1 or null, got {self.max_frames}")
+        if self.depth_scale is not None and not self.depth_scale > 0:
+            raise ValueError(f"depth_scale must be > 0 or null, got {self.depth_scale}")
+        if self.resize is not None and (len(self.resize) != 2 or min(self.resize) < 1):
+            raise ValueError(f"resize must be [width, height] or null, got {self.resize}")
+        if self.crop is not None and self.crop < 0:
+            raise ValueError(f"crop must be >= 0 or null, got {self.crop}")
 
 
 @dataclass

@@ -1,6 +1,8 @@
 """Dataset readers: one module per layout, registered here by name.
 
-``open_sequence(format, path)`` is the one way the rest of eslam opens data.
+``open_sequence(options)`` is the one way the rest of eslam opens data: it picks the
+reader of ``options.format`` and applies the frame selection (start, stride, max_frames).
+A reader is a callable ``reader(root: Path, options: DataConfig) -> RGBDSequence``.
 """
 
 from __future__ import annotations
@@ -8,23 +10,36 @@ from __future__ import annotations
 from collections.abc import Callable
 from pathlib import Path
 
+from eslam.config import DataConfig
 from eslam.data.base import RGBDSequence, iterate_frames
 from eslam.data.replica import ReplicaSequence
+from eslam.data.selection import FrameSelection, sequence_timestamps
 from eslam.errors import ConfigError
 
-DATASETS: dict[str, Callable[[Path], RGBDSequence]] = {
+DATASETS: dict[str, Callable[[Path, DataConfig], RGBDSequence]] = {
     "replica": ReplicaSequence,
 }
 """Reader of each supported layout, by the name ``data.format`` takes."""
 
 
-def open_sequence(format_name: str, path: str | Path) -> RGBDSequence:
-    """Open the sequence at ``path`` with the reader registered as ``format_name``.
+def open_sequence(options: DataConfig) -> RGBDSequence:
+    """Open ``options.path`` with the reader of ``options.format``, then select frames.
 
     Raises:
-        ConfigError: ``format_name`` is not a registered layout.
+        ConfigError: unknown layout, no path, or a frame selection outside the sequence.
         InputError: the folder is missing or its contents are invalid.
     """
+    if options.path is None:
+        raise ConfigError("data.path is not set (pass --data PATH or set data.path)")
+    sequence = open_all_frames(options)
+    if options.start == 0 and options.stride == 1 and options.max_frames is None:
+        return sequence
+    return FrameSelection(sequence, options.start, options.stride, options.max_frames)
+
+
+def open_all_frames(options: DataConfig) -> RGBDSequence:
+    """Open every frame of ``options.path`` with the reader of ``options.format``."""
+    format_name = options.format
     try:
         reader = DATASETS[format_name]
     except KeyError:
@@ -32,7 +47,15 @@ def open_sequence(format_name: str, path: str | Path) -> RGBDSequence:
         raise ConfigError(
             f"unknown data format '{format_name}' (choose one of: {choices})"
         ) from None
-    return reader(Path(path))
+    return reader(Path(str(options.path)), options)
 
 
-__all__ = ["DATASETS", "RGBDSequence", "iterate_frames", "open_sequence"]
+__all__ = [
+    "DATASETS",
+    "FrameSelection",
+    "RGBDSequence",
+    "iterate_frames",
+    "open_all_frames",
+    "open_sequence",
+    "sequence_timestamps",
+]

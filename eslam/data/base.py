@@ -18,6 +18,13 @@ from PIL import Image, UnidentifiedImageError
 from eslam.errors import InputError
 from eslam.types import Frame, Intrinsics
 
+DEPTH_MEDIAN_RANGE_M = (0.1, 20.0)
+"""A frame's median valid depth must lie in this range (metres) after scaling, or the
+depth scale is wrong: no indoor RGB-D sensor we read sees a median closer or farther."""
+
+COMMON_DEPTH_SCALES = (1.0, 1000.0, 5000.0, 6553.5)
+"""Depth PNG units per metre of the usual layouts (metres, ScanNet/7-Scenes mm, TUM, Replica)."""
+
 RIGID_TOLERANCE = 1e-3
 """Largest |R^T R - I| entry (and |det R - 1|) accepted for a ground-truth rotation."""
 
@@ -43,7 +50,15 @@ class RGBDSequence(Protocol):
         ...
 
     def gt_poses(self) -> np.ndarray | None:
-        """(N, 4, 4) float64 ground-truth camera-to-world poses, or None without ground truth."""
+        """(N, 4, 4) float64 ground-truth camera-to-world poses, or None without ground truth.
+
+        A frame whose ground truth is missing or unusable (ScanNet's non-finite poses)
+        has a NaN matrix: such frames are kept out of initialisation and evaluation.
+        """
+        ...
+
+    def timestamps(self) -> np.ndarray:
+        """(N,) float64 timestamps, seconds (the frame numbers where the dataset has none)."""
         ...
 
 
@@ -143,3 +158,35 @@ def check_pose(pose: np.ndarray, source: Path, label: str) -> np.ndarray:
             "poses must be camera-to-world rotations plus translations",
         )
     return pose
+
+
+def check_depth_units(depth: np.ndarray, path: Path, depth_scale: float) -> None:
+    """Raise if the valid depth of a frame cannot be in metres (the scale is wrong).
+
+    A frame with no valid depth passes (it is skipped by the run loop, with a warning).
+
+    Args:
+        depth: (H, W) depth in metres as read with ``depth_scale`` (0 = invalid).
+        path: the depth image, named in the error.
+        depth_scale: the units per metre used to read it.
+    """
+    valid = depth[depth > 0]
+    if valid.size == 0:
+        return
+    median = float(np.median(valid))
+    low, high = DEPTH_MEDIAN_RANGE_M
+    if low <= median <= high:
+        return
+    raw_median = median * depth_scale
+    fitting = [s for s in COMMON_DEPTH_SCALES if low <= raw_median / s <= high]
+    if fitting:
+        best = min(fitting, key=lambda s: abs(np.log(raw_median / s / 2.0)))
+        suggestion = f"depth scale {best:g} would give {raw_median / best:.2f} m"
+    else:
+        suggestion = f"a depth scale near {raw_median / 2.0:.4g} would give about 2 m"
+    raise InputError(
+        path,
+        f"median depth is {median:.4g} m with depth scale {depth_scale:g} units per metre, "
+        f"outside {low:g}-{high:g} m: the depth scale is wrong",
+        f"{suggestion}; set data.depth_scale",
+    )

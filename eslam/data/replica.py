@@ -24,7 +24,9 @@ import numpy as np
 from PIL import Image
 
 from eslam.atomic import write_text, write_with
+from eslam.config import DataConfig
 from eslam.data.base import (
+    check_depth_units,
     check_image_size,
     check_pose,
     read_depth,
@@ -32,6 +34,7 @@ from eslam.data.base import (
     require_dir,
     require_file,
 )
+from eslam.data.transform import ImageTransform
 from eslam.errors import InputError
 from eslam.types import Frame, Intrinsics
 
@@ -105,18 +108,26 @@ class ReplicaSequence:
 
     Args:
         root: the sequence folder (holding ``results/``, ``traj.txt``, ``cam_params.json``).
+        options: the ``data`` config section; its depth_scale (default: cam_params.json's),
+            resize and crop (default: none) apply.
 
     Raises:
         InputError: missing folder or files, colour/depth without a partner, more frames
             than poses, a non-rigid or non-finite pose, or bad camera parameters.
     """
 
-    def __init__(self, root: str | Path) -> None:
+    def __init__(self, root: str | Path, options: DataConfig | None = None) -> None:
+        options = options or DataConfig()
         self.root = require_dir(
             Path(root), "a Replica sequence: results/, traj.txt, cam_params.json"
         )
         results = require_dir(self.root / "results", "frame*.jpg and depth*.png images")
-        self.intrinsics, self.depth_scale = read_cam_params(self.root / "cam_params.json")
+        self.raw_intrinsics, file_scale = read_cam_params(self.root / "cam_params.json")
+        self.depth_scale = options.depth_scale or file_scale
+        self.transform = ImageTransform(
+            tuple(options.resize) if options.resize else None, options.crop or 0
+        )
+        self.intrinsics = self.transform.intrinsics(self.raw_intrinsics)
         colour = _numbered_files(results, _FRAME_RE)
         depth = _numbered_files(results, _DEPTH_RE)
         if not colour and not depth:
@@ -154,13 +165,14 @@ class ReplicaSequence:
             raise IndexError(f"frame {index} out of range for {len(self)} frames")
         rgb_path, depth_path = self._colour_paths[index], self._depth_paths[index]
         rgb = read_rgb(rgb_path)
-        check_image_size(rgb_path, rgb.shape, self.intrinsics)
+        check_image_size(rgb_path, rgb.shape, self.raw_intrinsics)
         depth = read_depth(depth_path, self.depth_scale)
-        check_image_size(depth_path, depth.shape, self.intrinsics)
+        check_image_size(depth_path, depth.shape, self.raw_intrinsics)
+        check_depth_units(depth, depth_path, self.depth_scale)
         return Frame(
             index=index,
-            rgb=rgb,
-            depth=depth,
+            rgb=self.transform.colour(rgb),
+            depth=self.transform.depth(depth),
             intrinsics=self.intrinsics,
             pose_gt=self._poses[index].copy(),
             timestamp=float(self.numbers[index]),
@@ -169,6 +181,10 @@ class ReplicaSequence:
     def gt_poses(self) -> np.ndarray:
         """(N, 4, 4) float64 camera-to-world poses of the frames present."""
         return self._poses.copy()
+
+    def timestamps(self) -> np.ndarray:
+        """(N,) the frame numbers (Replica has no time stamps)."""
+        return np.array(self.numbers, dtype=np.float64)
 
 
 def write_replica_sequence(

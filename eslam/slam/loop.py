@@ -86,7 +86,7 @@ def run_slam(
     if config.threads > 0:
         torch.set_num_threads(config.threads)
     device = _device(config.device)
-    sequence = open_sequence(config.data.format, config.data.path)
+    sequence = open_sequence(config.data)
     run = RunDirectory(Path(run_dir))
     run.root.mkdir(parents=True, exist_ok=True)
     handler = logging.FileHandler(run.log, mode="a", encoding="utf-8")

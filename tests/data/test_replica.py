@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 import torch
 
+from eslam.config import DataConfig
 from eslam.data import open_sequence
 from eslam.data.replica import REPLICA_DEPTH_SCALE, ReplicaSequence, write_replica_sequence
 from eslam.errors import ConfigError, InputError
@@ -69,9 +70,9 @@ def test_round_trip_depth_poses_and_colour(sequence_dir: Path) -> None:
 
 
 def test_open_sequence_by_format(sequence_dir: Path) -> None:
-    assert len(open_sequence("replica", sequence_dir)) == 3
+    assert len(open_sequence(DataConfig(format="replica", path=str(sequence_dir)))) == 3
     with pytest.raises(ConfigError, match=r"unknown data format 'replicaa'.*replica"):
-        open_sequence("replicaa", sequence_dir)
+        open_sequence(DataConfig(format="replicaa", path=str(sequence_dir)))
 
 
 def test_index_out_of_range(sequence_dir: Path) -> None:
