@@ -89,7 +89,7 @@ def _print_metrics(result) -> None:
 
 def _command_run(args: argparse.Namespace) -> int:
     from eslam.config import load_config
-    from eslam.io.run_dir import default_run_name, prepare_run_directory
+    from eslam.io.run_dir import default_run_name
     from eslam.slam.loop import run_slam
 
     overrides = list(args.overrides)
@@ -97,10 +97,12 @@ def _command_run(args: argparse.Namespace) -> int:
         overrides.append(f"data.path={args.data}")
     if args.device is not None:
         overrides.append(f"device={args.device}")
+    for option in ("start", "stride", "max_frames"):
+        if getattr(args, option) is not None:
+            overrides.append(f"data.{option}={getattr(args, option)}")
     config = load_config(args.config, overrides)
     out = Path(args.out) if args.out else Path(default_run_name(args.config))
-    run = prepare_run_directory(out, overwrite=args.overwrite)
-    _print_metrics(run_slam(config, run.root))
+    _print_metrics(run_slam(config, out, overwrite=args.overwrite))
     return 0
 
 
@@ -201,6 +203,9 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--data", help="sequence folder (sets data.path)")
     run.add_argument("--out", help="run folder (default runs/NAME-TIME)")
     run.add_argument("--device", help="cpu, cuda or cuda:N (sets device)")
+    run.add_argument("--start", type=int, help="first frame to use (sets data.start)")
+    run.add_argument("--stride", type=int, help="use every N-th frame (sets data.stride)")
+    run.add_argument("--max-frames", type=int, help="use at most N frames (sets data.max_frames)")
     run.add_argument("--overwrite", action="store_true", help="reuse an existing run folder")
     run.set_defaults(handler=_command_run)
 

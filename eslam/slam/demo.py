@@ -25,4 +25,4 @@ def run_demo(out_dir: str | Path, overrides: tuple[str, ...] = ()) -> RunResult:
         DEMO_CONFIG,
         [f"data.path={data}", f"scene.bound={bound}", *overrides],
     )
-    return run_slam(config, out_dir / "run")
+    return run_slam(config, out_dir / "run", overwrite=True)

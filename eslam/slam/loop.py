@@ -18,11 +18,11 @@ import numpy as np
 import torch
 
 from eslam.config import ESLAMConfig, save_config
-from eslam.data import RGBDSequence, open_sequence
-from eslam.errors import ConfigError
+from eslam.data import RGBDSequence, open_sequence, sequence_timestamps
+from eslam.errors import ConfigError, InputError
 from eslam.evaluate.trajectory import absolute_trajectory_error
 from eslam.geometry.pose import extrapolate_constant_velocity
-from eslam.io.run_dir import RunDirectory, write_json
+from eslam.io.run_dir import RunDirectory, prepare_run_directory, write_json
 from eslam.io.trajectory import write_tum_trajectory
 from eslam.render.rays import camera_directions
 from eslam.slam.mapping import MappingSettings, map_window
@@ -66,13 +66,39 @@ def _is_mapped(index: int, frames: int, every: int) -> bool:
     return index % every == 0 or index == frames - 1
 
 
+def _first_pose(gt: np.ndarray | None) -> torch.Tensor:
+    """Frame 0's pose: its ground truth when usable (it fixes the world frame), else identity."""
+    if gt is None or not np.all(np.isfinite(gt[0])):
+        return torch.eye(4)
+    return torch.from_numpy(gt[0]).float()
+
+
+def _frame_name(sequence: RGBDSequence, index: int) -> str:
+    timestamps = sequence_timestamps(sequence)
+    return f"timestamp {timestamps[index]:.6f}"
+
+
+def finite_ate_pairs(estimated: np.ndarray, gt: np.ndarray) -> np.ndarray:
+    """(N,) bool: frames whose estimated and ground-truth poses are both finite.
+
+    Frames without usable ground truth (NaN rows, e.g. ScanNet's lost tracking) are kept
+    out of the ATE.
+    """
+    return np.isfinite(estimated).all(axis=(1, 2)) & np.isfinite(gt).all(axis=(1, 2))
+
+
 def run_slam(
     config: ESLAMConfig,
     run_dir: str | Path,
     resume: bool = False,
     stop_after: int | None = None,
+    overwrite: bool = False,
 ) -> RunResult:
     """Run ESLAM on ``config.data`` and write the run folder ``run_dir``.
+
+    The input is checked before anything is written (the sequence opens, its first
+    and last frames read and pass the reader's checks), so bad input leaves an earlier
+    run in ``run_dir`` untouched.
 
     Args:
         config: the fully resolved configuration (saved as config.yaml).
@@ -80,6 +106,11 @@ def run_slam(
         resume: continue from ``run_dir/map.pt`` instead of starting afresh.
         stop_after: stop (checkpointed) after this many frames in total, as an
             interruption would; used by tests of ``resume``.
+        overwrite: start a new run in a folder that already holds one (its files are
+            replaced one by one as the new run writes them).
+
+    Raises:
+        ConfigError, InputError: bad configuration or input, before any file is written.
     """
     if config.data.path is None:
         raise ConfigError("data.path is not set (pass --data PATH or set data.path in the config)")
@@ -87,8 +118,8 @@ def run_slam(
         torch.set_num_threads(config.threads)
     device = _device(config.device)
     sequence = open_sequence(config.data)
-    run = RunDirectory(Path(run_dir))
-    run.root.mkdir(parents=True, exist_ok=True)
+    preflight(sequence)
+    run = RunDirectory(Path(run_dir)) if resume else prepare_run_directory(run_dir, overwrite)
     handler = logging.FileHandler(run.log, mode="a", encoding="utf-8")
     handler.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(message)s"))
     log.addHandler(handler)
@@ -110,6 +141,22 @@ def run_slam(
         handler.close()
 
 
+def preflight(sequence: RGBDSequence) -> None:
+    """Read the first and last frames of ``sequence``: the reader's checks raise on bad input.
+
+    Opening a sequence already checked its layout, file pairs and poses; reading two
+    frames checks the images (readable, sizes, depth units) before a run writes anything.
+
+    Raises:
+        InputError: no frames, or a frame fails its reader's checks.
+    """
+    if len(sequence) == 0:
+        raise InputError(sequence.root, "holds no frames", "check the --data path and its layout")
+    sequence[0]
+    if len(sequence) > 1:
+        sequence[len(sequence) - 1]
+
+
 def _process(
     config: ESLAMConfig,
     sequence: RGBDSequence,
@@ -128,23 +175,29 @@ def _process(
     for index in range(state.next_frame, end):
         frame = sequence[index]
         start = time.perf_counter()
+        has_depth = bool(frame.valid_depth.any())
+        if not has_depth:
+            log.warning(
+                "frame %d (%s) has no valid depth: skipped (pose predicted, not tracked or mapped)",
+                index,
+                _frame_name(sequence, index),
+            )
         if index == 0:
-            pose = torch.eye(4) if gt is None else torch.from_numpy(gt[0]).float()
-            pose = pose.to(device)
+            pose = _first_pose(gt).to(device)
         else:
-            view = _frame_view(frame, directions, device, config.tracking.border)
             previous = state.poses[index - 1]
             initial = previous
             if config.tracking.constant_velocity and index >= 2:
                 initial = extrapolate_constant_velocity(state.poses[index - 2], previous)
-            if len(view.candidates) == 0:
-                log.warning("frame %d has no valid depth: pose predicted, not tracked", index)
+            view = _frame_view(frame, directions, device, config.tracking.border)
+            if not has_depth or len(view.candidates) == 0 or len(state.keyframes) == 0:
                 pose = initial
             else:
                 pose = track_frame(state.field, view, initial, tracking, state.generator).pose
         state.poses[index] = pose
         tracked = time.perf_counter()
-        if _is_mapped(index, frames, config.mapping.every):
+        first_map = len(state.keyframes) == 0
+        if has_depth and (first_map or _is_mapped(index, frames, config.mapping.every)):
             _map(config, state, frame, index, directions, mapping, device)
         mapped = time.perf_counter()
         state.tracking_time.append(tracked - start)
@@ -202,7 +255,7 @@ def _finish(
 ) -> RunResult:
     done = state.next_frame
     poses = state.poses[:done].detach().cpu().double().numpy()
-    timestamps = np.array([float(i) for i in range(done)])
+    timestamps = sequence_timestamps(sequence)[:done]
     write_tum_trajectory(run.trajectory, timestamps, poses)
     gt = sequence.gt_poses()
     metrics: dict = {
@@ -212,9 +265,11 @@ def _finish(
         "peak_memory_mb": peak_memory_mb(device),
     }
     if gt is not None:
-        write_tum_trajectory(run.trajectory_gt, timestamps, gt[:done])
-        if done >= 3:
-            metrics.update(absolute_trajectory_error(poses, gt[:done]).as_cm())
+        usable = finite_ate_pairs(poses, gt[:done])
+        write_tum_trajectory(run.trajectory_gt, timestamps[usable], gt[:done][usable])
+        if usable.sum() >= 3:
+            metrics.update(absolute_trajectory_error(poses[usable], gt[:done][usable]).as_cm())
+            metrics["ate_frames"] = int(usable.sum())
     write_json(
         run.timings,
         {"tracking_s": list(state.tracking_time), "mapping_s": list(state.mapping_time)},

@@ -30,8 +30,11 @@ class RunProgress:
         self.bar.update(1)
         if self.gt is not None and index >= 2 and (index + 1) % ATE_EVERY == 0:
             estimated = poses.detach().cpu().double().numpy()
-            ate = absolute_trajectory_error(estimated, self.gt[: index + 1])
-            self.bar.set_postfix(ate_cm=f"{100 * ate.rmse:.2f}")
+            gt = self.gt[: index + 1]
+            usable = np.isfinite(estimated).all(axis=(1, 2)) & np.isfinite(gt).all(axis=(1, 2))
+            if usable.sum() >= 3:
+                ate = absolute_trajectory_error(estimated[usable], gt[usable])
+                self.bar.set_postfix(ate_cm=f"{100 * ate.rmse:.2f}")
 
     def close(self) -> None:
         """Close the bar."""
