@@ -12,12 +12,18 @@ from pathlib import Path
 
 from eslam.config import DataConfig
 from eslam.data.base import RGBDSequence, iterate_frames
+from eslam.data.folder import FolderSequence
 from eslam.data.replica import ReplicaSequence
+from eslam.data.scannet import ScanNetSequence
 from eslam.data.selection import FrameSelection, sequence_timestamps
+from eslam.data.sevenscenes import SevenScenesSequence
 from eslam.errors import ConfigError
 
 DATASETS: dict[str, Callable[[Path, DataConfig], RGBDSequence]] = {
     "replica": ReplicaSequence,
+    "scannet": ScanNetSequence,
+    "sevenscenes": SevenScenesSequence,
+    "folder": FolderSequence,
 }
 """Reader of each supported layout, by the name ``data.format`` takes."""
 

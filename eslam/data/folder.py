@@ -1,0 +1,359 @@
+"""A plain folder of registered colour + depth images, for any RGB-D sensor.
+
+Layout::
+
+    ROOT/color/<stem>.png|jpg|jpeg   colour images, all of one size
+    ROOT/depth/<stem>.png            16-bit depth, metres = value / depth_scale, 0 = invalid,
+                                     registered to the colour image (same size and camera)
+    ROOT/intrinsics.yaml             width, height, fx, fy, cx, cy, depth_scale
+                                     (optional: distortion, a list that must be all zeros)
+    ROOT/poses.txt                   optional ground truth, see below
+
+Colour and depth are paired by file stem (``000123.png`` with ``000123.png``, or
+``1305031102.175304.jpg`` with ``1305031102.175304.png``). When every stem is a number
+frames are ordered numerically and ``timestamps()`` are those numbers; otherwise they
+are ordered by name and the timestamps are the positions 0, 1, 2, ...
+
+The images must be undistorted: a non-zero ``distortion`` in ``intrinsics.yaml`` is an
+error (eslam models a pinhole camera; undistort with e.g. OpenCV first).
+
+``poses.txt`` (camera-to-world, OpenCV camera axes x right / y down / z forward, metres;
+blank lines and lines starting with ``#`` are skipped) comes in one of two forms, told
+apart by the number of values per line:
+
+- primary, TUM style, 8 values ``timestamp tx ty tz qx qy qz qw`` (the format eslam
+  writes its own trajectories in): a line belongs to the frame whose numeric stem equals
+  its timestamp (within :data:`TIMESTAMP_TOLERANCE`); frames without a line have no
+  ground truth (NaN rows in ``gt_poses()``), but at least one frame must match;
+- 16 values, a row-major 4x4 matrix per line, one line per frame in frame order.
+
+Without ``poses.txt``, ``gt_poses()`` returns None.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Iterable
+from pathlib import Path
+
+import numpy as np
+import torch
+import yaml
+from PIL import Image
+
+from eslam.atomic import write_text, write_with
+from eslam.config import DataConfig
+from eslam.data.base import (
+    check_depth_units,
+    check_image_size,
+    check_pose,
+    read_depth,
+    read_rgb,
+    require_dir,
+    require_file,
+)
+from eslam.data.transform import ImageTransform
+from eslam.errors import InputError
+from eslam.geometry.pose import pose_from_quaternion_translation, quaternion_translation_from_pose
+from eslam.types import Frame, Intrinsics
+
+INTRINSICS_FILE = "intrinsics.yaml"
+POSES_FILE = "poses.txt"
+
+TIMESTAMP_TOLERANCE = 1e-4
+"""Largest |stem - timestamp| (same units, seconds or frame numbers) pairing a TUM-style
+pose line with a frame; below TUM's 1e-6 s stamp precision times 100."""
+
+_COLOUR_SUFFIXES = (".png", ".jpg", ".jpeg")
+_DEPTH_SUFFIXES = (".png",)
+_INTRINSICS_KEYS = ("width", "height", "fx", "fy", "cx", "cy", "depth_scale")
+_NUMBER_RE = re.compile(r"^[+-]?(\d+(\.\d*)?|\.\d+)([eE][+-]?\d+)?$")
+
+
+def read_intrinsics_yaml(path: Path) -> tuple[Intrinsics, float]:
+    """Read ``intrinsics.yaml``: the camera and the depth scale (units per metre)."""
+    require_file(path, f"the camera: {', '.join(_INTRINSICS_KEYS)}")
+    fix = f"expected the keys {', '.join(_INTRINSICS_KEYS)} (and optional distortion)"
+    try:
+        data = yaml.safe_load(path.read_text(encoding="utf-8"))
+    except (yaml.YAMLError, UnicodeDecodeError) as error:
+        problem = str(error).replace("\n", " ")
+        raise InputError(path, f"not valid YAML ({problem})", fix) from None
+    if not isinstance(data, dict):
+        raise InputError(path, "must be a mapping of camera parameters", fix)
+    missing = [key for key in _INTRINSICS_KEYS if key not in data]
+    if missing:
+        raise InputError(path, f"missing {', '.join(missing)}", fix)
+    unknown = sorted(set(data) - set(_INTRINSICS_KEYS) - {"distortion"})
+    if unknown:
+        raise InputError(path, f"unknown key(s) {', '.join(map(str, unknown))}", fix)
+    try:
+        # Numbers are parsed explicitly: PyYAML reads 1e-3 as a string.
+        values = {key: float(data[key]) for key in _INTRINSICS_KEYS}
+        distortion = [float(v) for v in (data.get("distortion") or [])]
+        if values["width"] != int(values["width"]) or values["height"] != int(values["height"]):
+            raise ValueError("width and height must be whole numbers")
+        intrinsics = Intrinsics(
+            int(values["width"]),
+            int(values["height"]),
+            values["fx"],
+            values["fy"],
+            values["cx"],
+            values["cy"],
+        )
+    except (TypeError, ValueError) as error:
+        raise InputError(path, f"invalid camera parameters ({error})", fix) from None
+    if any(distortion):
+        raise InputError(
+            path,
+            f"non-zero distortion {distortion}: eslam reads pinhole images",
+            "undistort the images first (e.g. cv2.undistort) and set distortion to zeros",
+        )
+    scale = values["depth_scale"]
+    if not np.isfinite(scale) or scale <= 0:
+        raise InputError(path, f"depth_scale must be positive, got {scale:g}", fix)
+    return intrinsics, scale
+
+
+def _stem_files(folder: Path, suffixes: tuple[str, ...]) -> dict[str, Path]:
+    files: dict[str, Path] = {}
+    for path in folder.iterdir():
+        if path.is_file() and path.suffix.lower() in suffixes:
+            if path.stem in files:
+                raise InputError(
+                    path, f"has the same stem as {files[path.stem].name}", "keep one of them"
+                )
+            files[path.stem] = path
+    return files
+
+
+def _order(stems: Iterable[str]) -> tuple[list[str], np.ndarray]:
+    """Stems in frame order and their timestamps (the numbers, or positions)."""
+    stems = list(stems)
+    if all(_NUMBER_RE.match(stem) for stem in stems):
+        ordered = sorted(stems, key=float)
+        return ordered, np.array([float(s) for s in ordered], dtype=np.float64)
+    ordered = sorted(stems)
+    return ordered, np.arange(len(ordered), dtype=np.float64)
+
+
+def _pose_lines(path: Path) -> list[tuple[int, list[float]]]:
+    """(line number, values) of every pose line; all lines hold 8 or all hold 16 values."""
+    lines = []
+    for number, line in enumerate(path.read_text(encoding="utf-8").splitlines(), start=1):
+        text = line.strip()
+        if not text or text.startswith("#"):
+            continue
+        try:
+            values = [float(value) for value in text.replace(",", " ").split()]
+        except ValueError:
+            raise InputError(path, f"line {number}: not a list of numbers") from None
+        if len(values) not in (8, 16) or (lines and len(values) != len(lines[0][1])):
+            expected = len(lines[0][1]) if lines else "8 or 16"
+            raise InputError(
+                path,
+                f"line {number}: expected {expected} numbers, got {len(values)}",
+                "one 'timestamp tx ty tz qx qy qz qw' or one 4x4 row-major pose per line",
+            )
+        lines.append((number, values))
+    if not lines:
+        raise InputError(path, "holds no poses")
+    return lines
+
+
+def read_folder_poses(path: Path, timestamps: np.ndarray, numeric_stems: bool) -> np.ndarray:
+    """(N, 4, 4) float64 poses of the N frames with ``timestamps``; NaN where none matches.
+
+    Args:
+        path: the poses file.
+        timestamps: (N,) the frames' timestamps (TUM-style lines are matched to them).
+        numeric_stems: whether the timestamps are the file stems (else TUM-style lines
+            cannot be matched and are an error).
+
+    Raises:
+        InputError: bad lines, non-rigid or non-finite poses, a 4x4 file whose line count
+            is not the frame count, or a TUM-style file that matches no frame.
+    """
+    lines = _pose_lines(path)
+    poses = np.full((len(timestamps), 4, 4), np.nan)
+    if len(lines[0][1]) == 16:
+        if len(lines) != len(timestamps):
+            raise InputError(
+                path,
+                f"has {len(lines)} 4x4 poses for {len(timestamps)} frames",
+                "write one pose per frame, in frame order (or use timestamped TUM lines)",
+            )
+        for row, (number, values) in enumerate(lines):
+            pose = np.array(values).reshape(4, 4)
+            poses[row] = check_pose(pose, path, f"line {number}")
+        return poses
+    if not numeric_stems:
+        raise InputError(
+            path,
+            "timestamped pose lines need image files named by number or timestamp",
+            "rename the images (e.g. 000123.png) or write one 4x4 pose per line",
+        )
+    for number, values in lines:
+        q = torch.tensor(values[4:8], dtype=torch.float64)
+        if not torch.all(torch.isfinite(q)) or float(q.norm()) < 0.5:
+            raise InputError(
+                path, f"line {number}: quaternion {values[4:8]} is not a rotation (norm ~1)"
+            )
+        pose = pose_from_quaternion_translation(q, torch.tensor(values[1:4], dtype=torch.float64))
+        pose = check_pose(pose.numpy(), path, f"line {number}")
+        nearest = int(np.argmin(np.abs(timestamps - values[0])))
+        if abs(timestamps[nearest] - values[0]) <= TIMESTAMP_TOLERANCE:
+            poses[nearest] = pose
+    if np.isnan(poses).all():
+        raise InputError(
+            path,
+            f"no line's timestamp matches a frame stem (frames {timestamps[0]:.17g} to "
+            f"{timestamps[-1]:.17g})",
+            "the first value of each line must equal the image file's stem",
+        )
+    return poses
+
+
+class FolderSequence:
+    """Reader of a plain colour/depth folder (see the module docstring).
+
+    Args:
+        root: the folder holding ``color/``, ``depth/``, ``intrinsics.yaml`` and
+            optionally ``poses.txt``.
+        options: the ``data`` config section; depth_scale (default: intrinsics.yaml's),
+            resize and crop (default: none) apply.
+
+    Raises:
+        InputError: missing folder or file, a colour image without its depth partner
+            (or back), bad intrinsics (non-zero distortion included), images whose size
+            is not the intrinsics', or bad poses.
+    """
+
+    def __init__(self, root: str | Path, options: DataConfig | None = None) -> None:
+        options = options or DataConfig()
+        self.root = require_dir(Path(root), "color/, depth/ and intrinsics.yaml")
+        colour_dir = require_dir(self.root / "color", "colour images (.png/.jpg)")
+        depth_dir = require_dir(self.root / "depth", "16-bit depth .png images")
+        self.raw_intrinsics, file_scale = read_intrinsics_yaml(self.root / INTRINSICS_FILE)
+        self.depth_scale = options.depth_scale or file_scale
+        self.transform = ImageTransform(
+            tuple(options.resize) if options.resize else None, options.crop or 0
+        )
+        self.intrinsics = self.transform.intrinsics(self.raw_intrinsics)
+        colour = _stem_files(colour_dir, _COLOUR_SUFFIXES)
+        depth = _stem_files(depth_dir, _DEPTH_SUFFIXES)
+        if not colour and not depth:
+            raise InputError(colour_dir, "holds no colour images (.png/.jpg)")
+        for lone, partners, folder in ((colour, depth, depth_dir), (depth, colour, colour_dir)):
+            for stem in sorted(set(lone) - set(partners)):
+                raise InputError(
+                    lone[stem],
+                    f"has no partner {folder.name}/{stem}.* "
+                    f"({len(colour)} colour vs {len(depth)} depth images)",
+                    "colour and depth images are paired by file name",
+                )
+        self.numeric_stems = all(_NUMBER_RE.match(stem) for stem in colour)
+        self.stems, self._timestamps = _order(colour)
+        self._colour_paths = [colour[s] for s in self.stems]
+        self._depth_paths = [depth[s] for s in self.stems]
+        poses_path = self.root / POSES_FILE
+        self._poses = (
+            read_folder_poses(poses_path, self._timestamps, self.numeric_stems)
+            if poses_path.exists()
+            else None
+        )
+
+    def __len__(self) -> int:
+        return len(self.stems)
+
+    def __getitem__(self, index: int) -> Frame:
+        if not 0 <= index < len(self):
+            raise IndexError(f"frame {index} out of range for {len(self)} frames")
+        rgb_path, depth_path = self._colour_paths[index], self._depth_paths[index]
+        rgb = read_rgb(rgb_path)
+        check_image_size(rgb_path, rgb.shape, self.raw_intrinsics)
+        depth = read_depth(depth_path, self.depth_scale)
+        check_image_size(depth_path, depth.shape, self.raw_intrinsics)
+        check_depth_units(depth, depth_path, self.depth_scale)
+        pose = None if self._poses is None else self._poses[index]
+        return Frame(
+            index=index,
+            rgb=self.transform.colour(rgb),
+            depth=self.transform.depth(depth),
+            intrinsics=self.intrinsics,
+            pose_gt=None if pose is None or np.isnan(pose).any() else pose.copy(),
+            timestamp=float(self._timestamps[index]),
+        )
+
+    def gt_poses(self) -> np.ndarray | None:
+        """(N, 4, 4) float64 camera-to-world poses (NaN where a frame has none), or None."""
+        return None if self._poses is None else self._poses.copy()
+
+    def timestamps(self) -> np.ndarray:
+        """(N,) the numeric file stems, or the positions 0..N-1 when stems are not numbers."""
+        return self._timestamps.copy()
+
+
+def write_folder_sequence(
+    root: str | Path,
+    frames: Iterable[Frame],
+    depth_scale: float = 1000.0,
+    pose_format: str | None = "tum",
+) -> int:
+    """Write frames in the plain folder layout (atomically, file by file).
+
+    Stems are the zero-padded frame positions (``000000``), colour and depth are PNG.
+
+    Args:
+        root: output folder (created).
+        frames: frames sharing one camera.
+        depth_scale: PNG units per metre, written to intrinsics.yaml.
+        pose_format: "tum" (timestamped lines, timestamp = the stem's number), "matrix"
+            (one 4x4 per line) or None (no poses.txt). Frames without a pose get no
+            "tum" line; "matrix" needs every pose.
+
+    Returns:
+        The number of frames written.
+    """
+    if pose_format not in ("tum", "matrix", None):
+        raise ValueError(f"pose_format must be 'tum', 'matrix' or None, got {pose_format!r}")
+    root = Path(root)
+    intrinsics: Intrinsics | None = None
+    lines: list[str] = []
+    count = 0
+    for number, frame in enumerate(frames):
+        if intrinsics is None:
+            intrinsics = frame.intrinsics
+        elif frame.intrinsics != intrinsics:
+            raise ValueError("all frames of a folder sequence must share one camera")
+        stem = f"{number:06d}"
+        rgb = Image.fromarray(frame.rgb)
+        write_with(root / "color" / f"{stem}.png", lambda tmp, image=rgb: image.save(tmp, "PNG"))
+        units = np.round(np.nan_to_num(frame.depth, nan=0.0) * depth_scale)
+        depth = Image.fromarray(np.clip(units, 0, 65535).astype(np.uint16))
+        write_with(root / "depth" / f"{stem}.png", lambda tmp, image=depth: image.save(tmp, "PNG"))
+        if pose_format == "matrix":
+            if frame.pose_gt is None:
+                raise ValueError(f"frame {frame.index} has no pose: 'matrix' needs one per frame")
+            lines.append(" ".join(f"{v:.17g}" for v in frame.pose_gt.reshape(-1)))
+        elif pose_format == "tum" and frame.pose_gt is not None:
+            q, t = quaternion_translation_from_pose(torch.from_numpy(frame.pose_gt))
+            values = [float(number), *t.tolist(), *q.tolist()]
+            lines.append(" ".join(f"{v:.17g}" for v in values))
+        count += 1
+    if intrinsics is None:
+        raise ValueError("no frames to write")
+    camera = {
+        "width": intrinsics.width,
+        "height": intrinsics.height,
+        "fx": intrinsics.fx,
+        "fy": intrinsics.fy,
+        "cx": intrinsics.cx,
+        "cy": intrinsics.cy,
+        "depth_scale": depth_scale,
+    }
+    write_text(root / INTRINSICS_FILE, yaml.safe_dump(camera, sort_keys=False))
+    if pose_format is not None:
+        header = "# timestamp tx ty tz qx qy qz qw\n" if pose_format == "tum" else ""
+        write_text(root / POSES_FILE, header + "\n".join(lines) + "\n")
+    return count

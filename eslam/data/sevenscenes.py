@@ -1,0 +1,267 @@
+"""Microsoft 7-Scenes, in its native per-sequence layout.
+
+Layout::
+
+    ROOT/frame-000000.color.png|jpg   colour, 640x480
+    ROOT/frame-000000.depth.png       uint16 depth, millimetres; 0 and 65535 are invalid
+    ROOT/frame-000000.pose.txt        4x4 camera-to-world, OpenCV axes, metres
+    ROOT/camera-intrinsics.txt        optional 3x3 K (in ROOT or its parent folder)
+
+The official release holds one folder per recording, ``SCENE/seq-01/frame-...``: pass
+one ``seq-XX`` folder as the data path (a folder holding only ``seq-XX`` subfolders is
+refused with that advice; recordings are separate trajectories and are not chained).
+The official release ships no intrinsics file: without ``camera-intrinsics.txt`` the
+published values apply (:data:`SEVENSCENES_INTRINSICS`).
+
+Caveats of the data, handled here:
+
+- Depth 65535 marks invalid pixels as well as 0; both become 0.
+- Ground truth comes from KinectFusion; its rotation blocks are orthonormal only to
+  about 4e-4. Each is replaced by the nearest rotation (SVD) after checking that it is
+  close to one (:data:`ROTATION_TOLERANCE`), so a grossly broken pose is still an error.
+- Colour and depth are NOT registered (separate cameras a few centimetres apart,
+  uncalibrated): the depth camera's K is used for both and colour is off by a few
+  pixels. No correction is applied; expect slightly blurred colour in the map.
+
+Frames are ordered by their number (gaps allowed); timestamps are the frame numbers.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Iterable
+from pathlib import Path
+
+import numpy as np
+import torch
+from PIL import Image
+
+from eslam.atomic import write_text, write_with
+from eslam.config import DataConfig
+from eslam.data.base import (
+    check_depth_units,
+    check_image_size,
+    check_pose,
+    read_depth,
+    read_rgb,
+    require_dir,
+    require_file,
+)
+from eslam.data.scannet import fitting_intrinsics, image_size
+from eslam.data.transform import ImageTransform
+from eslam.errors import InputError
+from eslam.geometry.rotation import orthonormalize_rotation
+from eslam.types import Frame, Intrinsics
+
+SEVENSCENES_DEPTH_SCALE = 1000.0
+"""7-Scenes depth PNG units per metre (millimetres; dataset page)."""
+
+SEVENSCENES_INVALID_DEPTH = 65535
+"""Raw depth value 7-Scenes uses, besides 0, for pixels without depth (shared/data README)."""
+
+SEVENSCENES_INTRINSICS = Intrinsics(640, 480, 585.0, 585.0, 320.0, 240.0)
+"""The depth camera published on the 7-Scenes page (fx = fy = 585, cx = 320, cy = 240)."""
+
+ROTATION_TOLERANCE = 1e-2
+"""Largest |R^T R - I| entry (and |det R - 1|) of a raw 7-Scenes rotation before it is
+re-orthonormalised; the dataset's own are within ~4e-4."""
+
+INTRINSICS_FILE = "camera-intrinsics.txt"
+
+_FRAME_RE = re.compile(r"^frame-(\d+)\.(color|depth|pose)\.(png|jpg|jpeg|txt)$", re.IGNORECASE)
+_SEQUENCE_RE = re.compile(r"^seq-\d+$", re.IGNORECASE)
+
+
+def read_intrinsics_file(path: Path, size: tuple[int, int]) -> Intrinsics:
+    """Read ``camera-intrinsics.txt`` (3x3 K) for images of ``size`` (width, height)."""
+    try:
+        values = [float(value) for value in path.read_text(encoding="utf-8").split()]
+    except (ValueError, UnicodeDecodeError):
+        raise InputError(path, "not a list of numbers", "expected a 3x3 camera matrix") from None
+    if len(values) != 9:
+        raise InputError(path, f"expected 9 numbers (a 3x3 camera matrix), got {len(values)}")
+    k = np.array(values).reshape(3, 3)
+    return fitting_intrinsics(path, (k[0, 0], k[1, 1], k[0, 2], k[1, 2]), size)
+
+
+def find_intrinsics(root: Path, size: tuple[int, int]) -> Intrinsics:
+    """Intrinsics from ``camera-intrinsics.txt`` in ``root`` or its parent, else the published.
+
+    Args:
+        root: the recording folder.
+        size: (width, height) of its depth images.
+    """
+    for folder in (root, root.parent):
+        path = folder / INTRINSICS_FILE
+        if path.is_file():
+            return read_intrinsics_file(path, size)
+    return SEVENSCENES_INTRINSICS
+
+
+def rotation_error(rotation: np.ndarray) -> float:
+    """max(|R^T R - I|, |det R - 1|) of a (3, 3) matrix: 0 for a rotation."""
+    orthogonality = np.abs(rotation.T @ rotation - np.eye(3)).max()
+    return float(max(orthogonality, abs(np.linalg.det(rotation) - 1.0)))
+
+
+def read_sevenscenes_pose(path: Path) -> np.ndarray:
+    """(4, 4) float64 camera-to-world pose of ``frame-N.pose.txt``, rotation made orthonormal.
+
+    Raises:
+        InputError: not 16 numbers, non-finite, or a rotation off by more than
+            :data:`ROTATION_TOLERANCE`.
+    """
+    require_file(path, "a 4x4 camera-to-world pose")
+    try:
+        values = [float(value) for value in path.read_text(encoding="utf-8").split()]
+    except (ValueError, UnicodeDecodeError):
+        raise InputError(path, "not a list of numbers", "expected a 4x4 pose") from None
+    if len(values) != 16:
+        raise InputError(path, f"expected 16 numbers (a 4x4 pose), got {len(values)}")
+    pose = np.array(values, dtype=np.float64).reshape(4, 4)
+    if not np.all(np.isfinite(pose)):
+        check_pose(pose, path, "pose")  # raises the shared non-finite error
+    error = rotation_error(pose[:3, :3])
+    if error > ROTATION_TOLERANCE:
+        raise InputError(
+            path,
+            f"pose is not a rigid transform (rotation off by {error:.2g}, "
+            f"tolerance {ROTATION_TOLERANCE:g})",
+            "poses must be camera-to-world rotations plus translations",
+        )
+    pose[:3, :3] = orthonormalize_rotation(torch.from_numpy(pose[:3, :3])).numpy()
+    return check_pose(pose, path, "pose")
+
+
+def _frame_files(root: Path) -> dict[str, dict[int, Path]]:
+    files: dict[str, dict[int, Path]] = {"color": {}, "depth": {}, "pose": {}}
+    for path in root.iterdir():
+        match = _FRAME_RE.match(path.name)
+        if match:
+            files[match.group(2).lower()][int(match.group(1))] = path
+    return files
+
+
+def _refuse_scene_folder(root: Path) -> None:
+    sequences = sorted(p.name for p in root.iterdir() if p.is_dir() and _SEQUENCE_RE.match(p.name))
+    if sequences:
+        raise InputError(
+            root,
+            f"holds recordings {', '.join(sequences)} but no frame-*.color.png files",
+            f"pass one recording as the data path, e.g. {root / sequences[0]}",
+        )
+    raise InputError(root, "holds no frame-XXXXXX.color.png / .depth.png / .pose.txt files")
+
+
+class SevenScenesSequence:
+    """Reader of one 7-Scenes recording (see the module docstring).
+
+    Args:
+        root: the folder of ``frame-XXXXXX.*`` files (a ``seq-XX`` folder).
+        options: the ``data`` config section; depth_scale (default 1000), resize and
+            crop (default: none) apply.
+
+    Raises:
+        InputError: missing folder, a frame without its colour, depth or pose file, a
+            bad pose, bad intrinsics file, or images of the wrong size.
+    """
+
+    def __init__(self, root: str | Path, options: DataConfig | None = None) -> None:
+        options = options or DataConfig()
+        self.root = require_dir(Path(root), "a 7-Scenes recording: frame-XXXXXX.* files")
+        files = _frame_files(self.root)
+        if not files["color"] and not files["depth"]:
+            _refuse_scene_folder(self.root)
+        for kind, other in (("color", "depth"), ("depth", "color"), ("color", "pose")):
+            for number in sorted(set(files[kind]) - set(files[other])):
+                suffix = "pose.txt" if other == "pose" else f"{other}.png"
+                raise InputError(
+                    files[kind][number],
+                    f"has no partner frame-{number:06d}.{suffix} "
+                    f"({len(files[kind])} {kind} vs {len(files[other])} {other} files)",
+                    "every frame needs a colour, a depth and a pose file",
+                )
+        self.numbers = sorted(files["color"])
+        self._colour_paths = [files["color"][n] for n in self.numbers]
+        self._depth_paths = [files["depth"][n] for n in self.numbers]
+        self.raw_intrinsics = find_intrinsics(self.root, image_size(self._depth_paths[0]))
+        self.depth_scale = options.depth_scale or SEVENSCENES_DEPTH_SCALE
+        self.transform = ImageTransform(
+            tuple(options.resize) if options.resize else None, options.crop or 0
+        )
+        self.intrinsics = self.transform.intrinsics(self.raw_intrinsics)
+        self._poses = np.stack([read_sevenscenes_pose(files["pose"][n]) for n in self.numbers])
+
+    def __len__(self) -> int:
+        return len(self.numbers)
+
+    def __getitem__(self, index: int) -> Frame:
+        if not 0 <= index < len(self):
+            raise IndexError(f"frame {index} out of range for {len(self)} frames")
+        rgb_path, depth_path = self._colour_paths[index], self._depth_paths[index]
+        rgb = read_rgb(rgb_path)
+        check_image_size(rgb_path, rgb.shape, self.raw_intrinsics)
+        raw = read_depth(depth_path, 1.0)
+        check_image_size(depth_path, raw.shape, self.raw_intrinsics)
+        raw[raw == SEVENSCENES_INVALID_DEPTH] = 0.0
+        depth = raw / np.float32(self.depth_scale)
+        check_depth_units(depth, depth_path, self.depth_scale)
+        return Frame(
+            index=index,
+            rgb=self.transform.colour(rgb),
+            depth=self.transform.depth(depth),
+            intrinsics=self.intrinsics,
+            pose_gt=self._poses[index].copy(),
+            timestamp=float(self.numbers[index]),
+        )
+
+    def gt_poses(self) -> np.ndarray:
+        """(N, 4, 4) float64 camera-to-world poses, rotations re-orthonormalised."""
+        return self._poses.copy()
+
+    def timestamps(self) -> np.ndarray:
+        """(N,) the frame numbers (7-Scenes has no time stamps; it records at 30 Hz)."""
+        return np.array(self.numbers, dtype=np.float64)
+
+
+def write_sevenscenes_sequence(
+    root: str | Path, frames: Iterable[Frame], jpeg_quality: int = 95
+) -> int:
+    """Write frames in the 7-Scenes layout (atomically, file by file).
+
+    Colour is JPEG (as in shared/data's redkitchen), depth millimetres, poses 4x4 text,
+    and the frames' intrinsics go to ``camera-intrinsics.txt``.
+
+    Returns:
+        The number of frames written.
+    """
+    root = Path(root)
+    intrinsics: Intrinsics | None = None
+    count = 0
+    for number, frame in enumerate(frames):
+        if frame.pose_gt is None:
+            raise ValueError(f"frame {frame.index} has no pose: 7-Scenes needs one per frame")
+        if intrinsics is None:
+            intrinsics = frame.intrinsics
+        elif frame.intrinsics != intrinsics:
+            raise ValueError("all frames of a 7-Scenes sequence must share one camera")
+        stem = f"frame-{number:06d}"
+        rgb = Image.fromarray(frame.rgb)
+        write_with(
+            root / f"{stem}.color.jpg",
+            lambda tmp, image=rgb: image.save(tmp, format="JPEG", quality=jpeg_quality),
+        )
+        units = np.round(np.nan_to_num(frame.depth, nan=0.0) * SEVENSCENES_DEPTH_SCALE)
+        depth = Image.fromarray(np.clip(units, 0, 65534).astype(np.uint16))
+        write_with(
+            root / f"{stem}.depth.png",
+            lambda tmp, image=depth: image.save(tmp, "PNG"),
+        )
+        pose_text = "\n".join(" ".join(f"{v:.17g}" for v in row) for row in frame.pose_gt)
+        write_text(root / f"{stem}.pose.txt", pose_text + "\n")
+        count += 1
+    if intrinsics is None:
+        raise ValueError("no frames to write")
+    k_text = "\n".join(" ".join(f"{v:.17g}" for v in row) for row in intrinsics.matrix())
+    write_text(root / INTRINSICS_FILE, k_text + "\n")
+    return count
