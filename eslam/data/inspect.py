@@ -78,7 +78,9 @@ def inspect_sequence(
     poses = sequence.gt_poses()
     path_length = 0.0
     if poses is not None and len(poses) > 1:
-        path_length = float(np.linalg.norm(np.diff(poses[:, :3, 3], axis=0), axis=1).sum())
+        # frames without usable ground truth (NaN rows) are left out of the path
+        positions = poses[np.isfinite(poses).all(axis=(1, 2)), :3, 3]
+        path_length = float(np.linalg.norm(np.diff(positions, axis=0), axis=1).sum())
     return SequenceSummary(
         root=sequence.root,
         frames=count,
@@ -87,6 +89,6 @@ def inspect_sequence(
         depth_median_m=float(np.median(depth_all)),
         depth_max_m=float(depth_all.max()),
         invalid_depth_fraction=invalid / max(pixels, 1),
-        has_ground_truth=poses is not None,
+        has_ground_truth=poses is not None and bool(np.isfinite(poses).all(axis=(1, 2)).any()),
         path_length_m=path_length,
     )

@@ -68,7 +68,14 @@ def _is_mapped(index: int, frames: int, every: int) -> bool:
 
 def _first_pose(gt: np.ndarray | None) -> torch.Tensor:
     """Frame 0's pose: its ground truth when usable (it fixes the world frame), else identity."""
-    if gt is None or not np.all(np.isfinite(gt[0])):
+    if gt is None:
+        return torch.eye(4)
+    if not np.all(np.isfinite(gt[0])):
+        log.warning(
+            "frame 0 has no usable ground-truth pose: the run starts at the identity, so "
+            "its world frame differs from the ground truth's (a configured scene.bound "
+            "may not fit; the ATE aligns the two)"
+        )
         return torch.eye(4)
     return torch.from_numpy(gt[0]).float()
 

@@ -190,3 +190,14 @@ def test_wrong_depth_scale_is_named(scene: Path) -> None:
     with pytest.raises(InputError, match=r"depth scale 1000 would give") as caught:
         ScanNetSequence(scene, DataConfig(depth_scale=1.0))[0]
     assert caught.value.path.name == "0.png"
+
+
+def test_inspect_skips_lost_tracking_in_the_path_length(tmp_path: Path) -> None:
+    from eslam.data.inspect import inspect_sequence
+
+    frames = _frames()
+    frames[1] = dataclasses.replace(frames[1], pose_gt=None)
+    write_scannet_sequence(tmp_path, frames)
+    summary = inspect_sequence(ScanNetSequence(tmp_path))
+    assert summary.has_ground_truth
+    assert np.isfinite(summary.path_length_m) and summary.path_length_m > 0
