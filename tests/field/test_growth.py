@@ -157,3 +157,19 @@ def test_growth_with_one_level_and_shared_planes(levels: str) -> None:
     before = field.query(points)
     field.grow(LARGER, torch.Generator().manual_seed(1))
     torch.testing.assert_close(field.query(points).sdf, before.sdf, rtol=0, atol=1e-6)
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="no CUDA device")
+def test_growth_on_cuda_matches_cpu() -> None:
+    cpu = _trained_like()
+    cuda = _trained_like().to("cuda")
+    points = _inside(cpu.bound, 2000)
+    before = cuda.query(points.cuda())
+    cpu.grow(LARGER, torch.Generator().manual_seed(1))
+    cuda.grow(LARGER, torch.Generator(device="cuda").manual_seed(1))
+    assert torch.equal(cuda.bound.cpu(), cpu.bound)
+    after = cuda.query(points.cuda())
+    torch.testing.assert_close(after.sdf, before.sdf, rtol=0, atol=1e-6)
+    wide = _inside(LARGER, 2000)
+    loaded = SceneField.from_state(SMALL, {k: v.cpu() for k, v in cuda.state_dict().items()})
+    torch.testing.assert_close(loaded.query(wide).sdf, cuda.query(wide.cuda()).sdf.cpu())
