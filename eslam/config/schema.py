@@ -58,13 +58,34 @@ class SceneConfig:
     """The region of space the map covers."""
 
     bound: list[list[float]] | None = None
-    """Scene box [[xmin, xmax], [ymin, ymax], [zmin, zmax]] in metres; null = automatic."""
+    """Scene box [[xmin, xmax], [ymin, ymax], [zmin, zmax]] in metres; null = automatic:
+    the box of frame 0's depth points (0.5-99.5 percentiles per axis) and camera centre,
+    seen from frame 0's pose (ground truth or identity), plus ``auto_bound_margin``."""
+    auto_bound_margin: float = 0.5
+    """Metres added on every side of the automatic bound (frame 0 sees only part of a room;
+    growth covers the rest as the camera moves)."""
+    grow: bool = True
+    """Grow the bound (and the feature planes, keeping learnt features) when a keyframe's
+    depth points leave it; off: warn once with the share of points outside."""
+    grow_threshold: float = 0.01
+    """Share of a keyframe's depth points outside the bound above which it grows (or warns)."""
+    grow_margin: float = 0.5
+    """Metres beyond the keyframe's points (0.5-99.5 percentiles) on each side that grows."""
+    max_extent: float = 30.0
+    """Largest side (m) an automatic or grown bound may have; beyond it growth is refused
+    with a warning (a lost track or far depth outliers would otherwise fill memory)."""
 
     def __post_init__(self) -> None:
         if self.bound is not None and (
             len(self.bound) != 3 or any(len(p) != 2 or not p[0] < p[1] for p in self.bound)
         ):
             raise ValueError(f"bound must be 3 pairs [min, max] with min < max, got {self.bound}")
+        if self.auto_bound_margin < 0 or self.grow_margin < 0:
+            raise ValueError("auto_bound_margin and grow_margin must be >= 0 metres")
+        if not 0.0 <= self.grow_threshold < 1.0:
+            raise ValueError(f"grow_threshold must be in [0, 1), got {self.grow_threshold}")
+        if self.max_extent <= 0:
+            raise ValueError(f"max_extent must be positive metres, got {self.max_extent}")
 
 
 @dataclass

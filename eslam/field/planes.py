@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import Literal
 
 import torch
@@ -59,6 +60,34 @@ def fit_bound(bound: torch.Tensor, multiple: float) -> torch.Tensor:
     cells = torch.ceil((bound[:, 1].double() - low) / multiple - ROUNDING_TOLERANCE)
     high = low + cells.clamp(min=1) * multiple
     return torch.stack((low, high), dim=1).to(bound)
+
+
+def enclosing_bound(bound: torch.Tensor, required: torch.Tensor, multiple: float) -> torch.Tensor:
+    """The fitted bound grown by whole ``multiple`` steps on each side to hold ``required``.
+
+    Lower corners move down by whole multiples, upper corners follow :func:`fit_bound`,
+    so a side of the result is still a multiple of ``multiple`` and the result holds
+    ``bound`` exactly; sides ``required`` does not cross are unchanged.
+
+    Args:
+        bound: (3, 2) a fitted scene box, metres.
+        required: (3, 2) the box to hold, metres.
+        multiple: side length quantum, metres (``FieldConfig.bound_multiple``).
+
+    Returns:
+        (3, 2) float64 on the CPU.
+    """
+    _check_bound(bound)
+    old = bound.detach().cpu().double()
+    need = required.detach().cpu().double()
+    steps = torch.ceil((old[:, 0] - need[:, 0]) / multiple - ROUNDING_TOLERANCE).clamp(min=0)
+    low = old[:, 0] - steps * multiple
+    high = fit_bound(torch.stack((low, torch.maximum(old[:, 1], need[:, 1])), dim=1), multiple)[
+        :, 1
+    ]
+    # sides that need not grow keep their exact value (no rounding drift)
+    high = torch.where(need[:, 1] > old[:, 1], high, old[:, 1])
+    return torch.stack((low, high), dim=1)
 
 
 def normalize_points(points: torch.Tensor, bound: torch.Tensor) -> torch.Tensor:
@@ -226,6 +255,101 @@ def sample_planes_fast(
     return sampled.sum(dim=0)[:, 0, :].transpose(0, 1)
 
 
+IDENTITY_WINDOW = ((-1.0, 1.0), (-1.0, 1.0), (-1.0, 1.0))
+"""A level's window when its vertices span exactly the scene bound (every fresh level)."""
+
+
+def to_window(points_n: torch.Tensor, window: torch.Tensor) -> torch.Tensor:
+    """Normalised scene coordinates -> a level's own [-1, 1] coordinates.
+
+    q = 2 (p_n - w_min) / (w_max - w_min) - 1, with ``window`` (3, 2) the box the level's
+    first and last vertices span, in the scene's normalised coordinates.
+    """
+    window = window.to(points_n)
+    return 2.0 * (points_n - window[:, 0]) / (window[:, 1] - window[:, 0]) - 1.0
+
+
+@dataclass(frozen=True)
+class LevelGrowth:
+    """How a level's vertex grid grows to cover a larger scene bound.
+
+    Attributes:
+        low: vertices added before the first one, per axis (x, y, z).
+        grid: the new vertex counts (nx, ny, nz) = old + low + added after the last.
+        window: (3, 2) float64 the new grid's box in the NEW bound's normalised coordinates.
+    """
+
+    low: tuple[int, int, int]
+    grid: tuple[int, int, int]
+    window: torch.Tensor
+
+
+def level_growth(
+    grid: Sequence[int], window: torch.Tensor, old_bound: torch.Tensor, new_bound: torch.Tensor
+) -> LevelGrowth:
+    """The whole vertices to add on each side so a level's grid covers ``new_bound``.
+
+    The vertex spacing s = (box side) / (n - 1) stays: old vertices keep their world
+    positions exactly, shifted by an integer index ``low`` in the grown grid.
+
+    Args:
+        grid: current vertex counts (nx, ny, nz).
+        window: (3, 2) the level's box in ``old_bound``'s normalised coordinates.
+        old_bound: (3, 2) the scene bound ``window`` refers to, metres.
+        new_bound: (3, 2) the larger scene bound to cover, metres.
+    """
+    old = old_bound.detach().cpu().double()
+    new = new_bound.detach().cpu().double()
+    counts = torch.tensor([int(n) for n in grid], dtype=torch.float64)
+    box = old[:, :1] + (window.detach().cpu().double() + 1.0) / 2.0 * (old[:, 1:] - old[:, :1])
+    spacing = (box[:, 1] - box[:, 0]) / (counts - 1)
+    low = torch.ceil((box[:, 0] - new[:, 0]) / spacing - ROUNDING_TOLERANCE).clamp(min=0)
+    high = torch.ceil((new[:, 1] - box[:, 1]) / spacing - ROUNDING_TOLERANCE).clamp(min=0)
+    grown = torch.stack((box[:, 0] - low * spacing, box[:, 1] + high * spacing), dim=1)
+    window_new = 2.0 * (grown - new[:, :1]) / (new[:, 1:] - new[:, :1]) - 1.0
+    low_cells = tuple(int(v) for v in low.tolist())
+    new_grid = tuple(int(n + a + b) for n, a, b in zip(grid, low_cells, high.tolist(), strict=True))
+    return LevelGrowth(low=low_cells, grid=new_grid, window=window_new)  # type: ignore[arg-type]
+
+
+def grow_planes(
+    planes: torch.Tensor,
+    shapes: PlaneShapes,
+    growth: LevelGrowth,
+    init_std: float,
+    generator: torch.Generator | None = None,
+) -> torch.Tensor:
+    """A level's padded planes on its grown grid: old features copied, new ones drawn.
+
+    Plane i (axes (a, b) of :data:`PLANE_AXES`) moves to rows ``low[b]:`` and columns
+    ``low[a]:`` of the new plane; the rest of the new plane is normal(0, init_std)
+    from ``generator`` (as fresh planes are), the padding zero.
+
+    Args:
+        planes: (3, C, Hmax, Wmax) the level's current padded planes.
+        shapes: their true (h, w).
+        growth: from :func:`level_growth`.
+        init_std: standard deviation of the new features.
+        generator: random source (on the planes' device); None = torch's global one.
+
+    Returns:
+        (3, C, Hmax', Wmax') detached tensor on the planes' device and dtype.
+    """
+    new_shapes = plane_shapes(growth.grid)
+    height = max(h for h, _ in new_shapes)
+    width = max(w for _, w in new_shapes)
+    old = planes.detach()
+    grown = torch.zeros(3, old.shape[1], height, width, dtype=old.dtype, device=old.device)
+    for i, ((h, w), (nh, nw), (a, b)) in enumerate(
+        zip(shapes, new_shapes, PLANE_AXES, strict=True)
+    ):
+        fresh = torch.empty(old.shape[1], nh, nw, dtype=old.dtype, device=old.device)
+        grown[i, :, :nh, :nw] = fresh.normal_(0.0, init_std, generator=generator)
+        row, col = growth.low[b], growth.low[a]
+        grown[i, :, row : row + h, col : col + w] = old[i, :, :h, :w]
+    return grown
+
+
 class PlaneLevel(nn.Module):
     """One level of a plane set: the xy, xz and yz planes of one resolution.
 
@@ -234,22 +358,73 @@ class PlaneLevel(nn.Module):
             initialised normal(0, init_std) (release), zero padding beyond.
         shapes: the true (h, w) of the xy, xz, yz planes.
         fast: sample with :func:`sample_planes_fast` (else the reference).
+        window: (3, 2) buffer (in the state_dict): the box the first and last vertices
+            span, in the scene's normalised coordinates; [-1, 1] on every axis until the
+            scene bound grows (:meth:`grow`), then wider, so old vertices stay in place.
+        vertices: (3,) int64 buffer (in the state_dict): the grid (nx, ny, nz).
     """
 
     def __init__(self, grid: Sequence[int], channels: int, init_std: float, fast: bool = True):
         """Planes for a grid of (nx, ny, nz) vertices with ``channels`` features each."""
         super().__init__()
-        self.grid = tuple(int(n) for n in grid)
-        self.shapes = plane_shapes(self.grid)
         self.fast = fast
-        height = max(h for h, _ in self.shapes)
-        width = max(w for _, w in self.shapes)
-        planes = torch.zeros(3, channels, height, width)
-        for i, (h, w) in enumerate(self.shapes):
+        self.init_std = float(init_std)
+        grid = tuple(int(n) for n in grid)
+        shapes = plane_shapes(grid)
+        planes = torch.zeros(3, channels, max(h for h, _ in shapes), max(w for _, w in shapes))
+        for i, (h, w) in enumerate(shapes):
             planes[i, :, :h, :w].normal_(0.0, init_std)
+        self.register_buffer("window", torch.tensor(IDENTITY_WINDOW))
+        self.register_buffer("vertices", torch.tensor(grid, dtype=torch.int64))
+        self._set_grid(grid, planes)
+
+    def _set_grid(self, grid: tuple[int, int, int], planes: torch.Tensor) -> None:
+        """Install ``planes`` (3, C, Hmax, Wmax) for a grid of (nx, ny, nz) vertices."""
+        self.grid = grid
+        self.shapes = plane_shapes(grid)
+        height, width = planes.shape[2], planes.shape[3]
+        device = planes.device
         self.planes = nn.Parameter(planes)
-        self.register_buffer("padding", padding_mask(self.shapes, height, width), persistent=False)
-        self.register_buffer("scale", grid_scale(self.shapes, height, width), persistent=False)
+        self.vertices = torch.tensor(grid, dtype=torch.int64, device=self.vertices.device)
+        self.register_buffer(
+            "padding", padding_mask(self.shapes, height, width, device), persistent=False
+        )
+        self.register_buffer(
+            "scale", grid_scale(self.shapes, height, width, device), persistent=False
+        )
+        self._refresh_window()
+
+    def _refresh_window(self) -> None:
+        identity = torch.tensor(IDENTITY_WINDOW, dtype=self.window.dtype)
+        self._identity = bool(torch.equal(self.window.detach().cpu(), identity))
+
+    def grow(self, growth: LevelGrowth, generator: torch.Generator | None = None) -> None:
+        """Enlarge the grid as ``growth`` says, keeping every old feature at its vertex.
+
+        Replaces the ``planes`` parameter: optimisers holding the old one must be rebuilt.
+        """
+        planes = grow_planes(self.planes, self.shapes, growth, self.init_std, generator)
+        self.window = growth.window.to(self.window)
+        self._set_grid(growth.grid, planes)
+
+    def reshape_like(self, vertices: torch.Tensor, window: torch.Tensor) -> None:
+        """Re-allocate (zero) planes for a saved grid, so a grown level's state can load."""
+        grid = tuple(int(n) for n in vertices.tolist())
+        shapes = plane_shapes(grid)
+        planes = torch.zeros(
+            3,
+            self.channels,
+            max(h for h, _ in shapes),
+            max(w for _, w in shapes),
+            dtype=self.planes.dtype,
+            device=self.planes.device,
+        )
+        self.window = window.detach().to(self.window)
+        self._set_grid(grid, planes)  # type: ignore[arg-type]
+
+    def _load_from_state_dict(self, state_dict, prefix, *args, **kwargs) -> None:
+        super()._load_from_state_dict(state_dict, prefix, *args, **kwargs)
+        self._refresh_window()
 
     @property
     def channels(self) -> int:
@@ -262,6 +437,8 @@ class PlaneLevel(nn.Module):
 
     def sample(self, points_n: torch.Tensor) -> torch.Tensor:
         """(N, 3) normalised points -> (N, C) sum of the three planes' bilinear features."""
+        if not self._identity:
+            points_n = to_window(points_n, self.window)
         if self.fast:
             return sample_planes_fast(self.planes, self.shapes, points_n, self.padding, self.scale)
         return sample_planes_reference(self.planes, self.shapes, points_n)
@@ -319,6 +496,17 @@ class PlaneSet(nn.Module):
     def numel_used(self) -> int:
         """Learnable plane entries of all levels, padding excluded."""
         return sum(level.numel_used() for level in self.levels.values())
+
+    def grow(
+        self,
+        old_bound: torch.Tensor,
+        new_bound: torch.Tensor,
+        generator: torch.Generator | None = None,
+    ) -> None:
+        """Grow every level's grid from ``old_bound`` to cover ``new_bound`` (see
+        :func:`level_growth`); features inside the old grids keep their world positions."""
+        for level in self.levels.values():
+            level.grow(level_growth(level.grid, level.window, old_bound, new_bound), generator)
 
 
 def _check_bound(bound: torch.Tensor) -> None:

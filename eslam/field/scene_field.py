@@ -14,7 +14,7 @@ from torch import nn
 
 from eslam.config import FieldConfig
 from eslam.field.decoders import appearance_decoder, geometry_decoder
-from eslam.field.planes import PlaneSet, fit_bound, normalize_points
+from eslam.field.planes import PlaneLevel, PlaneSet, enclosing_bound, fit_bound, normalize_points
 from eslam.types import FieldOutput
 
 
@@ -82,8 +82,45 @@ class SceneField(nn.Module):
         if "bound" not in state:
             raise KeyError("field state has no 'bound' entry (not a SceneField state_dict?)")
         field = cls(config, state["bound"])
+        state = dict(state)
+        for name, level in field.named_modules():
+            if not isinstance(level, PlaneLevel):
+                continue
+            vertices, window = f"{name}.vertices", f"{name}.window"
+            if vertices not in state:  # saved before levels could grow: grids from the bound
+                state[vertices], state[window] = level.vertices, level.window
+            elif not torch.equal(state[vertices].cpu(), level.vertices.cpu()):
+                level.reshape_like(state[vertices], state.get(window, level.window))
         field.load_state_dict(state)
         return field
+
+    def grow(self, required: torch.Tensor, generator: torch.Generator | None = None) -> bool:
+        """Enlarge the bound to hold ``required``, keeping every learnt feature in place.
+
+        The new bound is :func:`~eslam.field.planes.enclosing_bound` of the current one
+        (whole ``bound_multiple`` steps per side). Each plane level keeps its vertex
+        spacing and gains whole vertices on the sides that grew, so ``query`` inside the
+        old bound is unchanged (up to float rounding); new features are drawn like
+        fresh ones from ``generator``. Plane parameters are replaced: build optimisers
+        after growing (tracking and mapping make theirs per call).
+
+        Args:
+            required: (3, 2) box to cover, metres.
+            generator: random source on the field's device; None = torch's global one.
+
+        Returns:
+            Whether the bound changed.
+        """
+        old = self.bound.detach().clone()
+        new = enclosing_bound(old, required, self.config.bound_multiple).to(old)
+        if torch.equal(new, old):
+            return False
+        for planes in (self.geometry, self.appearance):
+            if planes is not None:
+                planes.grow(old, new, generator)
+        with torch.no_grad():
+            self.bound.copy_(new)
+        return True
 
     def query(self, points: torch.Tensor, with_rgb: bool = True) -> FieldOutput:
         """The field at world points.

@@ -25,6 +25,7 @@ from eslam.geometry.pose import extrapolate_constant_velocity
 from eslam.io.run_dir import RunDirectory, prepare_run_directory, write_json
 from eslam.io.trajectory import write_tum_trajectory
 from eslam.render.rays import camera_directions
+from eslam.slam.bounds_policy import cover_keyframe
 from eslam.slam.mapping import MappingSettings, map_window
 from eslam.slam.progress import RunProgress, peak_memory_mb
 from eslam.slam.state import SLAMState, initial_state, load_state, save_state
@@ -228,6 +229,15 @@ def _map(
 ) -> None:
     store = state.keyframes
     current = store.add(frame, state.poses[index])
+    state.bound_warned = cover_keyframe(
+        state.field,
+        store.depth(current, device),
+        store.intrinsics,
+        state.poses[index],
+        config.scene,
+        state.generator,
+        state.bound_warned,
+    )
     window = state.window.select(store, current, state.generator)
     views = [
         make_view(store.rgb(k, device), store.depth(k, device), directions, border=0)

@@ -16,10 +16,11 @@ import torch
 
 from eslam.config import ESLAMConfig
 from eslam.data import RGBDSequence
-from eslam.errors import ConfigError, InputError
+from eslam.errors import InputError
 from eslam.field.scene_field import SceneField
 from eslam.io.checkpoint import load_checkpoint, save_checkpoint
 from eslam.mesh.extract import ObservedViews
+from eslam.slam.bounds_policy import initial_bound
 from eslam.slam.keyframes import KeyframeStore, make_window_strategy
 
 
@@ -35,6 +36,8 @@ class SLAMState:
         next_frame: index of the next frame to process.
         generator: the run's random generator (on the run's device).
         tracking_time / mapping_time: seconds per processed frame.
+        bound_warned: whether the run warned about depth points outside the bound
+            (once per run; not saved, so a resumed run may warn once more).
     """
 
     field: SceneField
@@ -45,6 +48,7 @@ class SLAMState:
     generator: torch.Generator
     tracking_time: list[float] = field(default_factory=list)
     mapping_time: list[float] = field(default_factory=list)
+    bound_warned: bool = False
 
     def observed_views(self, device: torch.device) -> ObservedViews:
         """The keyframes as observed space for mesh extraction."""
@@ -57,15 +61,6 @@ class SLAMState:
         )
 
 
-def _bound(config: ESLAMConfig) -> torch.Tensor:
-    if config.scene.bound is None:
-        raise ConfigError(
-            "scene.bound is not set: give the scene box as scene.bound=[[xmin,xmax],[ymin,ymax],"
-            "[zmin,zmax]] (metres, world frame of the poses)"
-        )
-    return torch.tensor(config.scene.bound, dtype=torch.float32)
-
-
 def _generator(config: ESLAMConfig, device: torch.device) -> torch.Generator:
     generator = torch.Generator(device=device)
     generator.manual_seed(config.seed)
@@ -73,9 +68,13 @@ def _generator(config: ESLAMConfig, device: torch.device) -> torch.Generator:
 
 
 def initial_state(config: ESLAMConfig, sequence: RGBDSequence, device: torch.device) -> SLAMState:
-    """A fresh state for ``sequence``: new field, no keyframes, seeded generator."""
+    """A fresh state for ``sequence``: new field, no keyframes, seeded generator.
+
+    The field covers ``config.scene.bound``, or a bound estimated from frame 0
+    (:func:`~eslam.slam.bounds_policy.initial_bound`).
+    """
     torch.manual_seed(config.seed)
-    field_ = SceneField(config.field, _bound(config)).to(device)
+    field_ = SceneField(config.field, initial_bound(config.scene, sequence)).to(device)
     keyframe_device = torch.device(config.mapping.keyframe_device or device)
     return SLAMState(
         field=field_,

@@ -1,0 +1,128 @@
+"""The scene bound during a run: estimated at start when not given, grown as keyframes see more.
+
+Start: without ``scene.bound`` the bound is frame 0's depth points (seen from frame 0's
+pose: ground truth when the sequence has it, else the identity) and camera centre,
+0.5-99.5 percentiles per axis, plus ``scene.auto_bound_margin`` metres. No ground truth
+beyond frame 0 is used, so it works for any sensor.
+
+During the run: every new keyframe's depth (subsampled) is back-projected with its
+estimated pose. When more than ``scene.grow_threshold`` of its points lie outside the
+bound, the bound and the feature planes grow (learnt features kept) to hold the
+points plus ``scene.grow_margin``; with ``scene.grow`` off, or when growth would pass
+``scene.max_extent``, a warning gives the share of points outside, once per run.
+Points outside the bound are never dropped silently: they read the planes' border.
+"""
+
+from __future__ import annotations
+
+import logging
+
+import torch
+
+from eslam.config import SceneConfig
+from eslam.data import RGBDSequence
+from eslam.errors import ConfigError, InputError
+from eslam.field.scene_field import SceneField
+from eslam.geometry.bounds import bound_coverage, depth_points, estimate_bound
+from eslam.types import Intrinsics
+
+log = logging.getLogger("eslam")
+
+
+def first_pose(sequence: RGBDSequence) -> torch.Tensor:
+    """(4, 4) float32 pose of frame 0: its ground truth, or the identity without one."""
+    gt = sequence.gt_poses()
+    return torch.eye(4) if gt is None else torch.from_numpy(gt[0]).float()
+
+
+def _format(bound: torch.Tensor) -> str:
+    return str([[round(float(v), 3) for v in row] for row in bound.tolist()])
+
+
+def initial_bound(scene: SceneConfig, sequence: RGBDSequence) -> torch.Tensor:
+    """(3, 2) float32 scene bound: ``scene.bound``, or estimated from frame 0 (module doc).
+
+    Raises:
+        InputError: no bound is set and frame 0 has no valid depth.
+        ConfigError: the estimated bound is wider than ``scene.max_extent``.
+    """
+    if scene.bound is not None:
+        return torch.tensor(scene.bound, dtype=torch.float32)
+    frame = sequence[0]
+    pose = first_pose(sequence).double()
+    depth = torch.from_numpy(frame.depth).double()
+    points = depth_points(depth, frame.intrinsics, pose)
+    if len(points) == 0:
+        raise InputError(
+            sequence.root,
+            "frame 0 has no valid depth, so no scene bound can be estimated",
+            "set scene.bound=[[xmin,xmax],[ymin,ymax],[zmin,zmax]] (metres)",
+        )
+    bound = estimate_bound(points, scene.auto_bound_margin, centres=pose[:3, 3]).float()
+    widest = float((bound[:, 1] - bound[:, 0]).max())
+    if widest > scene.max_extent:
+        raise ConfigError(
+            f"the scene bound estimated from frame 0's depth is {widest:.1f} m wide, more "
+            f"than scene.max_extent={scene.max_extent} m: set scene.bound or raise max_extent"
+        )
+    log.info(
+        "scene bound estimated from frame 0 (%d depth points, margin %.2f m): %s",
+        len(points),
+        scene.auto_bound_margin,
+        _format(bound),
+    )
+    return bound
+
+
+def cover_keyframe(
+    field: SceneField,
+    depth: torch.Tensor,
+    intrinsics: Intrinsics,
+    pose: torch.Tensor,
+    scene: SceneConfig,
+    generator: torch.Generator,
+    warned: bool,
+) -> bool:
+    """Grow ``field`` so it holds a keyframe's depth points, or warn (module doc).
+
+    Args:
+        field: the scene field (grown in place; build optimisers after this).
+        depth: (H, W) the keyframe's depth, metres, 0 = invalid.
+        intrinsics: its camera.
+        pose: (4, 4) its estimated camera-to-world pose.
+        scene: the bound settings.
+        generator: random source on the field's device (new plane features).
+        warned: whether this run has already warned about points outside the bound.
+
+    Returns:
+        The new ``warned`` flag (True once a warning was logged).
+    """
+    points = depth_points(depth, intrinsics, pose.to(depth))
+    coverage = bound_coverage(points, field.bound, scene.grow_margin)
+    if coverage.fraction_outside <= scene.grow_threshold or not coverage.grows:
+        return warned
+    old = field.bound.detach().clone()
+    widest = float((coverage.required[:, 1] - coverage.required[:, 0]).max())
+    if scene.grow and widest <= scene.max_extent:
+        field.grow(coverage.required, generator)
+        log.info(
+            "scene bound grown (%.1f%% of a keyframe's depth points were outside): %s -> %s",
+            100.0 * coverage.fraction_outside,
+            _format(old),
+            _format(field.bound),
+        )
+        return warned
+    if not warned:
+        reason = (
+            "scene.grow is off"
+            if not scene.grow
+            else f"growing would pass scene.max_extent={scene.max_extent} m ({widest:.1f} m)"
+        )
+        log.warning(
+            "%.1f%% of a keyframe's depth points lie outside the scene bound %s and read "
+            "its border features (%s; warned once): widen scene.bound or set scene.grow=true",
+            100.0 * coverage.fraction_outside,
+            _format(old),
+            reason,
+        )
+    return True

@@ -1,0 +1,171 @@
+"""Runs without a bound, with a bound too small (growth), and with growth off (warning)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from eslam.config import ESLAMConfig, load_config
+from eslam.data import open_sequence
+from eslam.data.synthetic import SynthConfig, read_synthetic_bound, write_synthetic_sequence
+from eslam.errors import InputError
+from eslam.geometry.bounds import depth_points, fraction_outside
+from eslam.io.checkpoint import load_checkpoint
+from eslam.slam.bounds_policy import initial_bound
+from eslam.slam.demo import DEMO_CONFIG
+from eslam.slam.loop import run_slam
+
+FRAMES = 12
+# As tests/slam/test_loop.py: tiny images, few rays and iterations (CI on 2 cores).
+TINY = [
+    "tracking.rays=200",
+    "tracking.border=4",
+    "tracking.iterations=8",
+    "mapping.rays=400",
+    "mapping.every=3",
+    "mapping.window=4",
+    "mapping.iterations=6",
+    "mapping.first_iterations=60",
+    "render.samples_stratified=12",
+    "render.samples_surface=6",
+    "output.progress=false",
+    "output.checkpoint_every=4",
+    "output.mesh=false",
+    "field.geometry_resolution=[0.24, 0.12]",
+    "field.appearance_resolution=[0.24, 0.12]",
+]
+TOO_SMALL = "scene.bound=[[0.5, 1.0], [0.5, 1.0], [0.5, 1.0]]"
+"""A hand-set bound that misses every point of the synthetic room's first frames."""
+
+
+@pytest.fixture(scope="module")
+def sequence(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    root = tmp_path_factory.mktemp("bounds") / "data"
+    write_synthetic_sequence(root, SynthConfig(frames=FRAMES, width=80, height=60, seed=3))
+    return root
+
+
+def _config(sequence: Path, *extra: str) -> ESLAMConfig:
+    return load_config(DEMO_CONFIG, [f"data.path={sequence}", *TINY, *extra])
+
+
+def _saved_bound(run_dir: Path) -> torch.Tensor:
+    return load_checkpoint(run_dir / "map.pt")["field"]["bound"]
+
+
+def _observed_points(sequence: Path) -> torch.Tensor:
+    """Every frame's depth points, placed with the ground-truth poses."""
+    frames = open_sequence("replica", sequence)
+    gt = frames.gt_poses()
+    return torch.cat(
+        [
+            depth_points(
+                torch.from_numpy(frames[i].depth).double(),
+                frames.intrinsics,
+                torch.from_numpy(gt[i]),
+            )
+            for i in range(len(frames))
+        ]
+    )
+
+
+@pytest.fixture(scope="module")
+def given_run(sequence: Path, tmp_path_factory: pytest.TempPathFactory):
+    bound = read_synthetic_bound(sequence)
+    return run_slam(_config(sequence, f"scene.bound={bound}"), tmp_path_factory.mktemp("g") / "r")
+
+
+@pytest.fixture(scope="module")
+def small_run(sequence: Path, tmp_path_factory: pytest.TempPathFactory):
+    return run_slam(_config(sequence, TOO_SMALL), tmp_path_factory.mktemp("s") / "run")
+
+
+def test_automatic_bound_covers_the_scene_and_tracks(
+    sequence: Path, given_run, tmp_path: Path
+) -> None:
+    auto = run_slam(_config(sequence), tmp_path / "auto")
+    log = (tmp_path / "auto" / "log.txt").read_text()
+    assert "scene bound estimated from frame 0" in log
+    bound = _saved_bound(auto.run_dir)
+    assert fraction_outside(_observed_points(sequence), bound) < 0.01
+    assert auto.metrics["ate_rmse_cm"] < 2.0
+    assert auto.metrics["ate_rmse_cm"] < 2.0 * given_run.metrics["ate_rmse_cm"] + 0.5
+    assert load_config(auto.run_dir / "config.yaml").scene.bound is None
+
+
+def test_too_small_bound_grows_and_still_tracks(sequence: Path, given_run, small_run) -> None:
+    log = (small_run.run_dir / "log.txt").read_text()
+    assert "scene bound grown (100.0% of a keyframe's depth points were outside)" in log
+    bound = _saved_bound(small_run.run_dir)
+    assert bool((bound[:, 0] <= 0.5).all()) and bool((bound[:, 1] >= 1.0).all())
+    assert fraction_outside(_observed_points(sequence), bound) < 0.01
+    assert small_run.metrics["ate_rmse_cm"] < 2.0
+    assert small_run.metrics["ate_rmse_cm"] < 2.0 * given_run.metrics["ate_rmse_cm"] + 0.5
+
+
+def test_resume_after_growth_gives_the_same_trajectory(
+    sequence: Path, small_run, tmp_path: Path
+) -> None:
+    out = tmp_path / "interrupted"
+    run_slam(_config(sequence, TOO_SMALL), out, stop_after=7)
+    assert "scene bound grown" in (out / "log.txt").read_text()
+    assert not torch.equal(_saved_bound(out), torch.tensor([[0.5, 1.0]] * 3))
+    resumed = run_slam(load_config(out / "config.yaml"), out, resume=True)
+    np.testing.assert_allclose(resumed.poses, small_run.poses, rtol=0, atol=1e-7)
+
+
+def test_growth_off_warns_once_with_the_share_of_points_lost(
+    sequence: Path, tmp_path: Path
+) -> None:
+    result = run_slam(
+        _config(sequence, TOO_SMALL, "scene.grow=false"), tmp_path / "r", stop_after=7
+    )
+    log = (tmp_path / "r" / "log.txt").read_text()
+    assert log.count("WARNING") == 1, log
+    assert "100.0% of a keyframe's depth points lie outside the scene bound" in log
+    assert "scene.grow is off" in log and "grown" not in log
+    assert np.isfinite(result.poses).all()
+    fitted = torch.tensor([[0.5, 1.22]] * 3)  # [0.5, 1.0] fitted to multiples of 0.24 m
+    torch.testing.assert_close(_saved_bound(result.run_dir), fitted, rtol=0, atol=1e-6)
+
+
+def test_growth_beyond_max_extent_is_refused_with_a_warning(sequence: Path, tmp_path: Path) -> None:
+    config = _config(sequence, TOO_SMALL, "scene.max_extent=1.0")
+    run_slam(config, tmp_path / "r", stop_after=1)
+    log = (tmp_path / "r" / "log.txt").read_text()
+    assert "would pass scene.max_extent=1.0 m" in log and "grown" not in log
+
+
+def test_initial_bound_without_depth_names_the_fix(sequence: Path, tmp_path: Path) -> None:
+    frames = open_sequence("replica", sequence)
+
+    class NoDepth:
+        root = frames.root
+        intrinsics = frames.intrinsics
+
+        def __len__(self) -> int:
+            return len(frames)
+
+        def __getitem__(self, index: int):
+            frame = frames[index]
+            frame.depth[:] = 0.0
+            return frame
+
+        def gt_poses(self):
+            return frames.gt_poses()
+
+    config = _config(sequence)
+    with pytest.raises(InputError, match=r"frame 0 has no valid depth.*set scene.bound"):
+        initial_bound(config.scene, NoDepth())
+    estimated = initial_bound(config.scene, frames)
+    first = depth_points(
+        torch.from_numpy(frames[0].depth).double(),
+        frames.intrinsics,
+        torch.from_numpy(frames.gt_poses()[0]),
+    )
+    assert fraction_outside(first, estimated) < 0.01
+    centre = torch.from_numpy(frames.gt_poses()[0][:3, 3]).float()
+    assert bool((estimated[:, 0] < centre - 0.49).all() and (estimated[:, 1] > centre).all())
