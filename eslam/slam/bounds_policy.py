@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import logging
 
+import numpy as np
 import torch
 
 from eslam.config import SceneConfig
@@ -29,10 +30,28 @@ from eslam.types import Intrinsics
 log = logging.getLogger("eslam")
 
 
+AUTO_BOUND_SEARCH = 30
+"""Frames searched, from frame 0, for the first with valid depth to estimate the bound."""
+
+
 def first_pose(sequence: RGBDSequence) -> torch.Tensor:
-    """(4, 4) float32 pose of frame 0: its ground truth, or the identity without one."""
+    """(4, 4) float32 pose of frame 0: its ground truth (it fixes the world frame), else identity.
+
+    Frame 0 without usable ground truth (a NaN row, e.g. ScanNet's lost tracking) also
+    starts at the identity, with a warning: the world frame then differs from the
+    ground truth's, which a configured scene.bound may not fit (the ATE aligns the two).
+    """
     gt = sequence.gt_poses()
-    return torch.eye(4) if gt is None else torch.from_numpy(gt[0]).float()
+    if gt is None:
+        return torch.eye(4)
+    if not np.all(np.isfinite(gt[0])):
+        log.warning(
+            "frame 0 has no usable ground-truth pose: the run starts at the identity, so "
+            "its world frame differs from the ground truth's (a configured scene.bound "
+            "may not fit; the ATE aligns the two)"
+        )
+        return torch.eye(4)
+    return torch.from_numpy(gt[0]).float()
 
 
 def _format(bound: torch.Tensor) -> str:
@@ -48,15 +67,21 @@ def initial_bound(scene: SceneConfig, sequence: RGBDSequence) -> torch.Tensor:
     """
     if scene.bound is not None:
         return torch.tensor(scene.bound, dtype=torch.float32)
-    frame = sequence[0]
     pose = first_pose(sequence).double()
-    depth = torch.from_numpy(frame.depth).double()
-    points = depth_points(depth, frame.intrinsics, pose)
+    points = torch.zeros(0, 3, dtype=torch.float64)
+    for index in range(min(len(sequence), AUTO_BOUND_SEARCH)):
+        # the first frame with depth, placed at frame 0's pose (the camera has barely
+        # moved yet; growth covers what this misses)
+        frame = sequence[index]
+        points = depth_points(torch.from_numpy(frame.depth).double(), frame.intrinsics, pose)
+        if len(points):
+            break
     if len(points) == 0:
         raise InputError(
             sequence.root,
-            "frame 0 has no valid depth, so no scene bound can be estimated",
-            "set scene.bound=[[xmin,xmax],[ymin,ymax],[zmin,zmax]] (metres)",
+            f"none of the first {AUTO_BOUND_SEARCH} frames has valid depth, so no scene "
+            "bound can be estimated",
+            "check the depth images, or set scene.bound=[[xmin,xmax],[ymin,ymax],[zmin,zmax]]",
         )
     bound = estimate_bound(points, scene.auto_bound_margin, centres=pose[:3, 3]).float()
     widest = float((bound[:, 1] - bound[:, 0]).max())
@@ -66,7 +91,7 @@ def initial_bound(scene: SceneConfig, sequence: RGBDSequence) -> torch.Tensor:
             f"than scene.max_extent={scene.max_extent} m: set scene.bound or raise max_extent"
         )
     log.info(
-        "scene bound estimated from frame 0 (%d depth points, margin %.2f m): %s",
+        "scene bound estimated from the first frame with depth (%d points, margin %.2f m): %s",
         len(points),
         scene.auto_bound_margin,
         _format(bound),

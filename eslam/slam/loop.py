@@ -25,7 +25,7 @@ from eslam.geometry.pose import extrapolate_constant_velocity
 from eslam.io.run_dir import RunDirectory, prepare_run_directory, write_json
 from eslam.io.trajectory import write_tum_trajectory
 from eslam.render.rays import camera_directions
-from eslam.slam.bounds_policy import cover_keyframe
+from eslam.slam.bounds_policy import cover_keyframe, first_pose
 from eslam.slam.mapping import MappingSettings, map_window
 from eslam.slam.progress import RunProgress, peak_memory_mb
 from eslam.slam.state import SLAMState, initial_state, load_state, save_state
@@ -65,20 +65,6 @@ def _frame_view(frame, directions: torch.Tensor, device: torch.device, border: i
 
 def _is_mapped(index: int, frames: int, every: int) -> bool:
     return index % every == 0 or index == frames - 1
-
-
-def _first_pose(gt: np.ndarray | None) -> torch.Tensor:
-    """Frame 0's pose: its ground truth when usable (it fixes the world frame), else identity."""
-    if gt is None:
-        return torch.eye(4)
-    if not np.all(np.isfinite(gt[0])):
-        log.warning(
-            "frame 0 has no usable ground-truth pose: the run starts at the identity, so "
-            "its world frame differs from the ground truth's (a configured scene.bound "
-            "may not fit; the ATE aligns the two)"
-        )
-        return torch.eye(4)
-    return torch.from_numpy(gt[0]).float()
 
 
 def _frame_name(sequence: RGBDSequence, index: int) -> str:
@@ -191,7 +177,7 @@ def _process(
                 _frame_name(sequence, index),
             )
         if index == 0:
-            pose = _first_pose(gt).to(device)
+            pose = first_pose(sequence).to(device)
         else:
             previous = state.poses[index - 1]
             initial = previous

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import torch
 
-from eslam.config import ESLAMConfig, load_config
+from eslam.config import DataConfig, ESLAMConfig, load_config
 from eslam.data import open_sequence
 from eslam.data.synthetic import SynthConfig, read_synthetic_bound, write_synthetic_sequence
 from eslam.errors import InputError
@@ -58,7 +58,7 @@ def _saved_bound(run_dir: Path) -> torch.Tensor:
 
 def _observed_points(sequence: Path) -> torch.Tensor:
     """Every frame's depth points, placed with the ground-truth poses."""
-    frames = open_sequence("replica", sequence)
+    frames = open_sequence(DataConfig(path=str(sequence)))
     gt = frames.gt_poses()
     return torch.cat(
         [
@@ -88,7 +88,7 @@ def test_automatic_bound_covers_the_scene_and_tracks(
 ) -> None:
     auto = run_slam(_config(sequence), tmp_path / "auto")
     log = (tmp_path / "auto" / "log.txt").read_text()
-    assert "scene bound estimated from frame 0" in log
+    assert "scene bound estimated from the first frame with depth" in log
     bound = _saved_bound(auto.run_dir)
     assert fraction_outside(_observed_points(sequence), bound) < 0.01
     assert auto.metrics["ate_rmse_cm"] < 2.0
@@ -140,7 +140,7 @@ def test_growth_beyond_max_extent_is_refused_with_a_warning(sequence: Path, tmp_
 
 
 def test_initial_bound_without_depth_names_the_fix(sequence: Path, tmp_path: Path) -> None:
-    frames = open_sequence("replica", sequence)
+    frames = open_sequence(DataConfig(path=str(sequence)))
 
     class NoDepth:
         root = frames.root
@@ -158,7 +158,7 @@ def test_initial_bound_without_depth_names_the_fix(sequence: Path, tmp_path: Pat
             return frames.gt_poses()
 
     config = _config(sequence)
-    with pytest.raises(InputError, match=r"frame 0 has no valid depth.*set scene.bound"):
+    with pytest.raises(InputError, match=r"first 30 frames has valid depth.*scene.bound"):
         initial_bound(config.scene, NoDepth())
     estimated = initial_bound(config.scene, frames)
     first = depth_points(
