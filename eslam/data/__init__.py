@@ -14,10 +14,12 @@ from eslam.config import DataConfig
 from eslam.data.base import RGBDSequence, iterate_frames
 from eslam.data.replica import ReplicaSequence
 from eslam.data.selection import FrameSelection, sequence_timestamps
+from eslam.data.tum import TUMSequence
 from eslam.errors import ConfigError
 
 DATASETS: dict[str, Callable[[Path, DataConfig], RGBDSequence]] = {
     "replica": ReplicaSequence,
+    "tum": TUMSequence,
 }
 """Reader of each supported layout, by the name ``data.format`` takes."""
 
