@@ -25,6 +25,7 @@ from eslam.data.tum import (
     associate,
     camera_for,
     nearest,
+    read_groundtruth,
     write_tum_sequence,
 )
 from eslam.errors import ConfigError, InputError
@@ -404,3 +405,28 @@ def test_depth_in_wrong_units(sequence_dir: Path) -> None:
 def test_writer_refuses_frames_of_another_camera(fr3_frames, tmp_path: Path) -> None:
     with pytest.raises(ValueError, match="not those of TUM fr1"):
         write_tum_sequence(tmp_path / "x", fr3_frames[:1], camera="fr1")
+
+
+# --- real TUM ground truth ------------------------------------------------------------
+
+
+@pytest.mark.realdata
+@pytest.mark.parametrize(
+    ("name", "count"),
+    [("freiburg1_xyz-groundtruth.txt", 3000), ("fr2_desk_groundtruth.txt", 20957)],
+)
+def test_real_groundtruth_is_in_the_optical_frame(real_data: Path, name: str, count: int) -> None:
+    groundtruth = read_groundtruth(real_data / "tum-trajectories" / name)
+    assert len(groundtruth.timestamps) == count
+    assert np.median(np.diff(groundtruth.timestamps)) < 0.011  # 100 Hz (fr2/desk 300 Hz)
+    rotation = groundtruth.poses[:, :3, :3]
+    rigid = np.abs(np.swapaxes(rotation, 1, 2) @ rotation - np.eye(3)).max()
+    assert rigid < 1e-12
+    # The mocap world has z up (the camera is held ~1.5 m high). In OpenCV optical axes
+    # a hand-held camera looking down at a desk has its x axis (image right) level,
+    # its y axis (image down) pointing down and its z axis (forward) tilted down: true
+    # for every pose of both sequences (OpenGL axes would make y point up, z backward).
+    assert np.all(np.abs(rotation[:, 2, 0]) < 0.3)
+    assert np.all(rotation[:, 2, 1] < -0.5)
+    assert np.all(rotation[:, 2, 2] < 0.0)
+    assert 1.0 < float(np.median(groundtruth.poses[:, 2, 3])) < 2.0
