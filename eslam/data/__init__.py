@@ -17,11 +17,13 @@ from eslam.data.replica import ReplicaSequence
 from eslam.data.scannet import ScanNetSequence
 from eslam.data.selection import FrameSelection, sequence_timestamps
 from eslam.data.sevenscenes import SevenScenesSequence
+from eslam.data.tum import TUMSequence
 from eslam.errors import ConfigError
 
 DATASETS: dict[str, Callable[[Path, DataConfig], RGBDSequence]] = {
     "replica": ReplicaSequence,
     "scannet": ScanNetSequence,
+    "tum": TUMSequence,
     "sevenscenes": SevenScenesSequence,
     "folder": FolderSequence,
 }
