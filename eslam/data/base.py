@@ -8,13 +8,15 @@ poses in OpenCV axes. Anything wrong with the input raises
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Protocol, runtime_checkable
 
 import numpy as np
 from PIL import Image, UnidentifiedImageError
 
+from eslam.data.transform import ImageTransform
 from eslam.errors import InputError
 from eslam.types import Frame, Intrinsics
 
@@ -190,3 +192,80 @@ def check_depth_units(depth: np.ndarray, path: Path, depth_scale: float) -> None
         f"outside {low:g}-{high:g} m: the depth scale is wrong",
         f"{suggestion}; set data.depth_scale",
     )
+
+
+ImagePreparation = Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]
+"""(rgb, depth metres) -> (rgb, depth metres) at the raw camera, e.g. TUM's undistortion."""
+
+
+@dataclass(frozen=True, eq=False)
+class FrameReading:
+    """How a reader turns one colour + depth file pair into a :class:`Frame`.
+
+    Every reader's frames go through :meth:`read`, so the checks (image sizes, depth
+    units), the invalid-depth rule and the resize/crop are the same for all layouts.
+
+    Attributes:
+        raw_intrinsics: the camera of the files as stored.
+        depth_scale: depth PNG units per metre.
+        transform: resize + crop applied last (intrinsics follow: :attr:`intrinsics`).
+        invalid_depth: a raw depth value meaning "no depth" besides 0 (7-Scenes: 65535).
+        colour_any_size: resize colour to the depth size instead of requiring it
+            (ScanNet's colour is 1296x968, its depth 640x480).
+        prepare: applied to (rgb, depth) at the raw camera before the transform.
+    """
+
+    raw_intrinsics: Intrinsics
+    depth_scale: float
+    transform: ImageTransform = field(default_factory=ImageTransform)
+    invalid_depth: int | None = None
+    colour_any_size: bool = False
+    prepare: ImagePreparation | None = None
+
+    @property
+    def intrinsics(self) -> Intrinsics:
+        """The camera of the frames :meth:`read` returns."""
+        return self.transform.intrinsics(self.raw_intrinsics)
+
+    def read(
+        self,
+        index: int,
+        files: tuple[Path, Path],
+        pose: np.ndarray | None,
+        timestamp: float,
+    ) -> Frame:
+        """Read, check and transform one frame.
+
+        Args:
+            index: the frame's position in its sequence.
+            files: its (colour, depth) images.
+            pose: (4, 4) ground-truth camera-to-world, or None / a NaN matrix for none.
+            timestamp: seconds, or the frame number.
+
+        Raises:
+            InputError: unreadable image, wrong size, or depth that cannot be metres.
+        """
+        colour_path, depth_path = files
+        raw = self.raw_intrinsics
+        rgb = read_rgb(colour_path)
+        if self.colour_any_size:
+            rgb = ImageTransform(raw.size).colour(rgb)
+        else:
+            check_image_size(colour_path, rgb.shape, raw)
+        units = read_depth(depth_path, 1.0)
+        check_image_size(depth_path, units.shape, raw)
+        if self.invalid_depth is not None:
+            units[units == self.invalid_depth] = 0.0
+        depth = units / np.float32(self.depth_scale)
+        check_depth_units(depth, depth_path, self.depth_scale)
+        if self.prepare is not None:
+            rgb, depth = self.prepare(rgb, depth)
+        usable = pose is not None and bool(np.isfinite(pose).all())
+        return Frame(
+            index=index,
+            rgb=self.transform.colour(rgb),
+            depth=self.transform.depth(depth),
+            intrinsics=self.intrinsics,
+            pose_gt=np.array(pose, dtype=np.float64) if usable else None,
+            timestamp=float(timestamp),
+        )

@@ -44,15 +44,12 @@ from PIL import Image
 from eslam.atomic import write_text, write_with
 from eslam.config import DataConfig
 from eslam.data.base import (
-    check_depth_units,
-    check_image_size,
+    FrameReading,
     check_pose,
-    read_depth,
-    read_rgb,
     require_dir,
     require_file,
 )
-from eslam.data.transform import ImageTransform
+from eslam.data.transform import transform_from_options
 from eslam.errors import InputError
 from eslam.geometry.pose import pose_from_quaternion_translation, quaternion_translation_from_pose
 from eslam.types import Frame, Intrinsics
@@ -236,10 +233,9 @@ class FolderSequence:
         depth_dir = require_dir(self.root / "depth", "16-bit depth .png images")
         self.raw_intrinsics, file_scale = read_intrinsics_yaml(self.root / INTRINSICS_FILE)
         self.depth_scale = options.depth_scale or file_scale
-        self.transform = ImageTransform(
-            tuple(options.resize) if options.resize else None, options.crop or 0
-        )
-        self.intrinsics = self.transform.intrinsics(self.raw_intrinsics)
+        self.transform = transform_from_options(options.resize, options.crop)
+        self.reading = FrameReading(self.raw_intrinsics, self.depth_scale, self.transform)
+        self.intrinsics = self.reading.intrinsics
         colour = _stem_files(colour_dir, _COLOUR_SUFFIXES)
         depth = _stem_files(depth_dir, _DEPTH_SUFFIXES)
         if not colour and not depth:
@@ -269,21 +265,9 @@ class FolderSequence:
     def __getitem__(self, index: int) -> Frame:
         if not 0 <= index < len(self):
             raise IndexError(f"frame {index} out of range for {len(self)} frames")
-        rgb_path, depth_path = self._colour_paths[index], self._depth_paths[index]
-        rgb = read_rgb(rgb_path)
-        check_image_size(rgb_path, rgb.shape, self.raw_intrinsics)
-        depth = read_depth(depth_path, self.depth_scale)
-        check_image_size(depth_path, depth.shape, self.raw_intrinsics)
-        check_depth_units(depth, depth_path, self.depth_scale)
+        files = (self._colour_paths[index], self._depth_paths[index])
         pose = None if self._poses is None else self._poses[index]
-        return Frame(
-            index=index,
-            rgb=self.transform.colour(rgb),
-            depth=self.transform.depth(depth),
-            intrinsics=self.intrinsics,
-            pose_gt=None if pose is None or np.isnan(pose).any() else pose.copy(),
-            timestamp=float(self._timestamps[index]),
-        )
+        return self.reading.read(index, files, pose, self._timestamps[index])
 
     def gt_poses(self) -> np.ndarray | None:
         """(N, 4, 4) float64 camera-to-world poses (NaN where a frame has none), or None."""

@@ -26,15 +26,12 @@ from PIL import Image
 from eslam.atomic import write_text, write_with
 from eslam.config import DataConfig
 from eslam.data.base import (
-    check_depth_units,
-    check_image_size,
+    FrameReading,
     check_pose,
-    read_depth,
-    read_rgb,
     require_dir,
     require_file,
 )
-from eslam.data.transform import ImageTransform
+from eslam.data.transform import transform_from_options
 from eslam.errors import InputError
 from eslam.types import Frame, Intrinsics
 
@@ -124,10 +121,9 @@ class ReplicaSequence:
         results = require_dir(self.root / "results", "frame*.jpg and depth*.png images")
         self.raw_intrinsics, file_scale = read_cam_params(self.root / "cam_params.json")
         self.depth_scale = options.depth_scale or file_scale
-        self.transform = ImageTransform(
-            tuple(options.resize) if options.resize else None, options.crop or 0
-        )
-        self.intrinsics = self.transform.intrinsics(self.raw_intrinsics)
+        self.transform = transform_from_options(options.resize, options.crop)
+        self.reading = FrameReading(self.raw_intrinsics, self.depth_scale, self.transform)
+        self.intrinsics = self.reading.intrinsics
         colour = _numbered_files(results, _FRAME_RE)
         depth = _numbered_files(results, _DEPTH_RE)
         if not colour and not depth:
@@ -163,20 +159,8 @@ class ReplicaSequence:
     def __getitem__(self, index: int) -> Frame:
         if not 0 <= index < len(self):
             raise IndexError(f"frame {index} out of range for {len(self)} frames")
-        rgb_path, depth_path = self._colour_paths[index], self._depth_paths[index]
-        rgb = read_rgb(rgb_path)
-        check_image_size(rgb_path, rgb.shape, self.raw_intrinsics)
-        depth = read_depth(depth_path, self.depth_scale)
-        check_image_size(depth_path, depth.shape, self.raw_intrinsics)
-        check_depth_units(depth, depth_path, self.depth_scale)
-        return Frame(
-            index=index,
-            rgb=self.transform.colour(rgb),
-            depth=self.transform.depth(depth),
-            intrinsics=self.intrinsics,
-            pose_gt=self._poses[index].copy(),
-            timestamp=float(self.numbers[index]),
-        )
+        files = (self._colour_paths[index], self._depth_paths[index])
+        return self.reading.read(index, files, self._poses[index], self.numbers[index])
 
     def gt_poses(self) -> np.ndarray:
         """(N, 4, 4) float64 camera-to-world poses of the frames present."""

@@ -34,15 +34,12 @@ from PIL import Image, UnidentifiedImageError
 from eslam.atomic import write_text, write_with
 from eslam.config import DataConfig
 from eslam.data.base import (
-    check_depth_units,
-    check_image_size,
+    FrameReading,
     check_pose,
-    read_depth,
-    read_rgb,
     require_dir,
     require_file,
 )
-from eslam.data.transform import ImageTransform
+from eslam.data.transform import transform_from_options
 from eslam.errors import InputError
 from eslam.types import Frame, Intrinsics
 
@@ -195,11 +192,13 @@ class ScanNetSequence:
         self.raw_intrinsics = depth_intrinsics(
             self.root / "intrinsic" / "intrinsic_depth.txt", image_size(self._depth_paths[0])
         )
-        self.transform = ImageTransform(
-            tuple(options.resize) if options.resize else None,
-            SCANNET_CROP if options.crop is None else options.crop,
+        self.transform = transform_from_options(
+            options.resize, options.crop, default_crop=SCANNET_CROP
         )
-        self.intrinsics = self.transform.intrinsics(self.raw_intrinsics)
+        self.reading = FrameReading(
+            self.raw_intrinsics, self.depth_scale, self.transform, colour_any_size=True
+        )
+        self.intrinsics = self.reading.intrinsics
         self._poses = np.stack([read_scannet_pose(poses[n]) for n in self.numbers])
 
     def __len__(self) -> int:
@@ -208,25 +207,8 @@ class ScanNetSequence:
     def __getitem__(self, index: int) -> Frame:
         if not 0 <= index < len(self):
             raise IndexError(f"frame {index} out of range for {len(self)} frames")
-        rgb_path, depth_path = self._colour_paths[index], self._depth_paths[index]
-        depth = read_depth(depth_path, self.depth_scale)
-        check_image_size(depth_path, depth.shape, self.raw_intrinsics)
-        check_depth_units(depth, depth_path, self.depth_scale)
-        rgb = read_rgb(rgb_path)
-        if (rgb.shape[1], rgb.shape[0]) != self.raw_intrinsics.size:
-            resized = Image.fromarray(rgb).resize(
-                self.raw_intrinsics.size, Image.Resampling.BILINEAR
-            )
-            rgb = np.asarray(resized, dtype=np.uint8)
-        pose = self._poses[index]
-        return Frame(
-            index=index,
-            rgb=self.transform.colour(rgb),
-            depth=self.transform.depth(depth),
-            intrinsics=self.intrinsics,
-            pose_gt=None if np.isnan(pose).any() else pose.copy(),
-            timestamp=float(self.numbers[index]),
-        )
+        files = (self._colour_paths[index], self._depth_paths[index])
+        return self.reading.read(index, files, self._poses[index], self.numbers[index])
 
     def gt_poses(self) -> np.ndarray:
         """(N, 4, 4) float64 camera-to-world poses; NaN matrices where tracking was lost."""

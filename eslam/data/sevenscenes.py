@@ -39,16 +39,13 @@ from PIL import Image
 from eslam.atomic import write_text, write_with
 from eslam.config import DataConfig
 from eslam.data.base import (
-    check_depth_units,
-    check_image_size,
+    FrameReading,
     check_pose,
-    read_depth,
-    read_rgb,
     require_dir,
     require_file,
 )
 from eslam.data.scannet import fitting_intrinsics, image_size
-from eslam.data.transform import ImageTransform
+from eslam.data.transform import transform_from_options
 from eslam.errors import InputError
 from eslam.geometry.rotation import orthonormalize_rotation
 from eslam.types import Frame, Intrinsics
@@ -186,10 +183,14 @@ class SevenScenesSequence:
         self._depth_paths = [files["depth"][n] for n in self.numbers]
         self.raw_intrinsics = find_intrinsics(self.root, image_size(self._depth_paths[0]))
         self.depth_scale = options.depth_scale or SEVENSCENES_DEPTH_SCALE
-        self.transform = ImageTransform(
-            tuple(options.resize) if options.resize else None, options.crop or 0
+        self.transform = transform_from_options(options.resize, options.crop)
+        self.reading = FrameReading(
+            self.raw_intrinsics,
+            self.depth_scale,
+            self.transform,
+            invalid_depth=SEVENSCENES_INVALID_DEPTH,
         )
-        self.intrinsics = self.transform.intrinsics(self.raw_intrinsics)
+        self.intrinsics = self.reading.intrinsics
         self._poses = np.stack([read_sevenscenes_pose(files["pose"][n]) for n in self.numbers])
 
     def __len__(self) -> int:
@@ -198,22 +199,8 @@ class SevenScenesSequence:
     def __getitem__(self, index: int) -> Frame:
         if not 0 <= index < len(self):
             raise IndexError(f"frame {index} out of range for {len(self)} frames")
-        rgb_path, depth_path = self._colour_paths[index], self._depth_paths[index]
-        rgb = read_rgb(rgb_path)
-        check_image_size(rgb_path, rgb.shape, self.raw_intrinsics)
-        raw = read_depth(depth_path, 1.0)
-        check_image_size(depth_path, raw.shape, self.raw_intrinsics)
-        raw[raw == SEVENSCENES_INVALID_DEPTH] = 0.0
-        depth = raw / np.float32(self.depth_scale)
-        check_depth_units(depth, depth_path, self.depth_scale)
-        return Frame(
-            index=index,
-            rgb=self.transform.colour(rgb),
-            depth=self.transform.depth(depth),
-            intrinsics=self.intrinsics,
-            pose_gt=self._poses[index].copy(),
-            timestamp=float(self.numbers[index]),
-        )
+        files = (self._colour_paths[index], self._depth_paths[index])
+        return self.reading.read(index, files, self._poses[index], self.numbers[index])
 
     def gt_poses(self) -> np.ndarray:
         """(N, 4, 4) float64 camera-to-world poses, rotations re-orthonormalised."""

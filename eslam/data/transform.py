@@ -67,3 +67,17 @@ class ImageTransform:
             return np.ascontiguousarray(image)
         c = self.crop
         return np.ascontiguousarray(image[c:-c, c:-c])
+
+
+def transform_from_options(
+    resize: tuple[int, int] | list[int] | None,
+    crop: int | None,
+    default_size: tuple[int, int] | None = None,
+    default_crop: int = 0,
+) -> ImageTransform:
+    """The transform a reader applies: ``data.resize`` / ``data.crop``, or its defaults.
+
+    ``None`` means "the layout's default"; an explicit 0 crop is kept (no crop).
+    """
+    size = tuple(resize) if resize is not None else default_size
+    return ImageTransform(size, default_crop if crop is None else crop)

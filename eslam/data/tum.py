@@ -42,15 +42,12 @@ from PIL import Image
 from eslam.atomic import write_text, write_with
 from eslam.config import DataConfig
 from eslam.data.base import (
-    check_depth_units,
-    check_image_size,
+    FrameReading,
     check_pose,
-    read_depth,
-    read_rgb,
     require_dir,
     require_file,
 )
-from eslam.data.transform import ImageTransform
+from eslam.data.transform import transform_from_options
 from eslam.data.undistort import PlumbBob, Undistorter, distort_map, remap_bilinear, remap_nearest
 from eslam.errors import ConfigError, InputError
 from eslam.geometry.pose import (
@@ -350,16 +347,22 @@ class TUMSequence:
         self.root = require_dir(Path(root), "a TUM RGB-D sequence: rgb.txt, depth.txt, images")
         self.camera = camera_for(self.root, options.camera)
         self.depth_scale = options.depth_scale or TUM_DEPTH_SCALE
-        size = tuple(options.resize) if options.resize else TUM_RESIZE
-        crop = TUM_CROP if options.crop is None else options.crop
-        self.transform = ImageTransform(size, crop)
-        self.intrinsics = self.transform.intrinsics(self.camera.intrinsics)
+        self.transform = transform_from_options(
+            options.resize, options.crop, default_size=TUM_RESIZE, default_crop=TUM_CROP
+        )
         distortion = self.camera.distortion
         self._undistort = (
             Undistorter(self.camera.intrinsics, distortion)
             if distortion is not None and not distortion.is_identity
             else None
         )
+        self.reading = FrameReading(
+            self.camera.intrinsics,
+            self.depth_scale,
+            self.transform,
+            prepare=None if self._undistort is None else self._undistort.images,
+        )
+        self.intrinsics = self.reading.intrinsics
         colour = read_file_list(self.root / "rgb.txt", "colour images")
         depth = read_file_list(self.root / "depth.txt", "depth images")
         gt_path = self.root / "groundtruth.txt"
@@ -395,23 +398,9 @@ class TUMSequence:
     def __getitem__(self, index: int) -> Frame:
         if not 0 <= index < len(self):
             raise IndexError(f"frame {index} out of range for {len(self)} frames")
-        rgb_path, depth_path = self._colour_paths[index], self._depth_paths[index]
-        raw = self.camera.intrinsics
-        rgb = read_rgb(rgb_path)
-        check_image_size(rgb_path, rgb.shape, raw)
-        depth = read_depth(depth_path, self.depth_scale)
-        check_image_size(depth_path, depth.shape, raw)
-        check_depth_units(depth, depth_path, self.depth_scale)
-        if self._undistort is not None:
-            rgb, depth = self._undistort.colour(rgb), self._undistort.depth(depth)
-        return Frame(
-            index=index,
-            rgb=self.transform.colour(rgb),
-            depth=self.transform.depth(depth),
-            intrinsics=self.intrinsics,
-            pose_gt=None if self._poses is None else self._poses[index].copy(),
-            timestamp=float(self._times[index]),
-        )
+        files = (self._colour_paths[index], self._depth_paths[index])
+        pose = None if self._poses is None else self._poses[index]
+        return self.reading.read(index, files, pose, self._times[index])
 
     def gt_poses(self) -> np.ndarray | None:
         """(N, 4, 4) camera-to-world poses relative to frame 0, or None without groundtruth.txt."""

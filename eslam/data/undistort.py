@@ -268,3 +268,7 @@ class Undistorter:
     def depth(self, depth: np.ndarray) -> np.ndarray:
         """(H, W) float32 metres -> (H, W) float32 metres (nearest, 0 = invalid outside)."""
         return apply_nearest(depth, self._plan)
+
+    def images(self, rgb: np.ndarray, depth: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Both images of a registered pair: (:meth:`colour`, :meth:`depth`)."""
+        return self.colour(rgb), self.depth(depth)
