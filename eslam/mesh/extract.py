@@ -20,7 +20,6 @@ query, whatever the bound. Vertex colours come from the appearance decoder.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -29,12 +28,12 @@ import torch
 
 from eslam.data.mesh_io import TriangleMesh
 from eslam.mesh.grid import (
-    NEAR_SURFACE_FACTOR,
     ExtractionGrid,
     all_corners,
     cell_points,
     crossing_cells,
     make_grid,
+    near_surface_threshold,
     refine_cells,
     surface_cells,
 )
@@ -50,9 +49,9 @@ from eslam.types import FieldOutput
 __all__ = ["ExtractOptions", "ObservedViews", "TSDFField", "extract_mesh", "observed_mask"]
 
 COARSE_STEP_FRACTION = 0.5
-"""Default coarse step, in units of the truncation T: with it the near-surface test
-(|sdf| * T <= 2 * half-diagonal = sqrt(3) * T / 2 = 0.87 T) stays inside the
-truncation band, where the TSDF still measures distance."""
+"""Default coarse step, in units of the truncation T (rounded to whole fine steps: 3 at
+1 cm, 2 at 2 cm for T = 6 cm): the near-surface test (|sdf| * T <= 2 * half-diagonal,
+about 0.87 T) then stays inside the truncation band, where the TSDF measures distance."""
 
 DEFAULT_BLOCK_CELLS = 64
 """Fine cells per block side: 65^3 points, ~1.4 MB of float32 TSDF per block."""
@@ -253,7 +252,7 @@ def extract_mesh(
     truncation = float(field.truncation)
     coarse = options.coarse_step or COARSE_STEP_FRACTION * truncation
     grid = make_grid(bound[:, 0], bound[:, 1], resolution, coarse, options.block_cells)
-    near = NEAR_SURFACE_FACTOR * math.sqrt(3) / 2 * grid.coarse_step / truncation
+    near = near_surface_threshold(grid.coarse_step, truncation)
     pieces = []
     for block, visible in _blocks_to_visit(grid, views):
         seen = None if views is None else (views, visible)

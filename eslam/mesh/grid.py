@@ -20,6 +20,17 @@ half-diagonal of the cell of it (|sdf| * T <= 2 * (sqrt(3) / 2) * coarse step); 
 point of a cell is within one half-diagonal of its nearest corner, so an exact SDF
 needs factor 1; 2 leaves room for a learned field that is not exactly 1-Lipschitz."""
 
+NEAR_SURFACE_CAP = 0.95
+"""The near-surface test never accepts |sdf| above this (TSDF units): values near 1 are
+saturated (free space or deep inside) and say nothing about distance. Sound for an exact
+SDF while the coarse cell's half-diagonal stays below 0.95 T (coarse step < 1.1 T)."""
+
+
+def near_surface_threshold(coarse_step: float, truncation: float) -> float:
+    """|sdf| (units of T) under which a coarse corner counts as near the surface."""
+    half_diagonal = math.sqrt(3) / 2 * coarse_step
+    return min(NEAR_SURFACE_FACTOR * half_diagonal / truncation, NEAR_SURFACE_CAP)
+
 
 @dataclass(frozen=True)
 class ExtractionGrid:
@@ -81,12 +92,12 @@ def make_grid(
     Args:
         lower, upper: (3,) box corners, metres.
         step: fine step (mesh resolution), metres.
-        coarse_step: wanted coarse step, metres; rounded down to a whole number
+        coarse_step: wanted coarse step, metres; rounded to the nearest whole number
             (at least 1) of fine steps.
         block_cells: wanted fine cells per block side; rounded to a multiple of the
             coarse factor (at least one coarse cell, at most the whole grid).
     """
-    factor = max(1, math.floor(coarse_step / step + 1e-9))
+    factor = max(1, round(coarse_step / step))
     coarse = step * factor
     extent = np.asarray(upper, dtype=np.float64) - np.asarray(lower, dtype=np.float64)
     cells = tuple(max(1, math.ceil(e / coarse - 1e-9)) for e in extent)
