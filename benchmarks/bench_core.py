@@ -29,18 +29,14 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import datetime
-import os
-import platform
-import shlex
-import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 import torch
+from _machine import DEFAULT_DOCS, append_section, command_line, load_average, machine_lines
 
-from eslam.atomic import write_text
 from eslam.config import ESLAMConfig
 from eslam.field.scene_field import SceneField
 from eslam.geometry.pose import (
@@ -55,9 +51,6 @@ from eslam.slam.tracking import frozen
 from eslam.slam.views import View, concatenate_rays, make_view, sample_view_rays
 from eslam.types import Intrinsics
 
-REPO = Path(__file__).resolve().parents[1]
-DEFAULT_DOCS = REPO / "docs" / "benchmarks.md"
-
 ROOM0_BOUND = [[-1.9, 7.9], [-2.2, 4.5], [-2.5, 2.3]]
 """Replica room0's scene bound in the authors' release (configs/Replica/room0.yaml), m."""
 
@@ -71,15 +64,6 @@ WINDOW = 10
 """Keyframes in the mapping window; the oldest pose is fixed, the others are optimised."""
 
 SEED = 0
-
-INTRO = """# Benchmarks
-
-Every figure here comes from a command in this repo; the machine is named with each
-table. Sections are appended by the scripts in `benchmarks/` (see
-`benchmarks/README.md`), newest last; the exact command line is given with each table
-so it can be run again. Timings from different machines, thread counts or loads are
-not comparable.
-"""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -306,41 +290,6 @@ def markdown_table(results: dict[tuple[str, str], Stats], config: ESLAMConfig) -
     return "\n".join(lines) + "\n"
 
 
-def cpu_model() -> str:
-    """The CPU's model name from /proc/cpuinfo, else what ``platform`` knows."""
-    try:
-        with open("/proc/cpuinfo", encoding="utf-8") as cpuinfo:
-            for line in cpuinfo:
-                if line.lower().startswith("model name"):
-                    return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or platform.machine() or "unknown CPU"
-
-
-def load_average() -> float | None:
-    """The 1-minute load average (None where the OS has none): other work on the machine."""
-    return os.getloadavg()[0] if hasattr(os, "getloadavg") else None
-
-
-def machine_lines(device: torch.device, load: tuple[float | None, float | None]) -> list[str]:
-    """Bullet lines naming the machine and software the timings were taken on."""
-    lines = [
-        f"- CPU: {cpu_model()}, {os.cpu_count()} logical cores; "
-        f"{platform.system()} {platform.release()} ({platform.machine()})",
-        f"- Python {platform.python_version()}, torch {torch.__version__}, "
-        f"{torch.get_num_threads()} intra-op threads",
-    ]
-    if None not in load:
-        lines.append(
-            f"- 1-minute load average: {load[0]:.1f} at the start, {load[1]:.1f} at the end"
-        )
-    if device.type == "cuda":
-        index = device.index if device.index is not None else torch.cuda.current_device()
-        lines.append(f"- GPU: {torch.cuda.get_device_name(index)} (CUDA {torch.version.cuda})")
-    return lines
-
-
 def report(
     results: dict[tuple[str, str], Stats],
     facts: dict[str, object],
@@ -367,12 +316,6 @@ def report(
     if args.note:
         lines.append(f"- note: {args.note}")
     return "\n".join([*lines, "", markdown_table(results, config)])
-
-
-def append_section(path: Path, section: str) -> None:
-    """Append ``section`` to the markdown file at ``path`` (created with the intro)."""
-    text = path.read_text(encoding="utf-8") if path.exists() else INTRO
-    write_text(path, text.rstrip("\n") + "\n\n" + section)
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
@@ -403,21 +346,12 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     return args
 
 
-def command_line(argv: list[str] | None) -> str:
-    """The command that ran this, with the script's path relative to the repo root."""
-    if argv is not None:
-        return shlex.join(["python", "benchmarks/bench_core.py", *argv])
-    script = Path(sys.argv[0]).resolve()
-    shown = script.relative_to(REPO).as_posix() if script.is_relative_to(REPO) else sys.argv[0]
-    return shlex.join(["python", shown, *sys.argv[1:]])
-
-
 def main(argv: list[str] | None = None) -> None:
     args = parse_args(argv)
     if args.threads > 0:
         torch.set_num_threads(args.threads)
     device = torch.device(args.device)
-    command = command_line(argv)
+    command = command_line("benchmarks/bench_core.py", argv)
     load_start = load_average()
     results, facts = run(device, args.warmup, args.repeats)
     section = report(results, facts, device, args, command, (load_start, load_average()))

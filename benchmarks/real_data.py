@@ -32,7 +32,7 @@ from pathlib import Path
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_core import append_section, load_average, machine_lines
+from _machine import append_section, load_average, machine_lines
 
 from eslam.config import load_config
 from eslam.slam.loop import RunResult, run_slam

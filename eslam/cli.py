@@ -120,6 +120,27 @@ def _command_resume(args: argparse.Namespace) -> int:
     return 0
 
 
+def _positive_float(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive number, got '{text}'") from None
+    if not value > 0:
+        raise argparse.ArgumentTypeError(f"expected a positive number, got '{text}'")
+    return value
+
+
+def _command_mesh(args: argparse.Namespace) -> int:
+    from eslam.slam.remesh import remesh_run
+
+    result = remesh_run(args.run_dir, resolution=args.resolution, device=args.device)
+    print(
+        f"wrote {result.path} ({result.vertices} vertices, {result.faces} faces, "
+        f"{result.resolution:g} m grid, {result.seconds:.1f} s)"
+    )
+    return 0
+
+
 def _command_demo(args: argparse.Namespace) -> int:
     from eslam.slam.demo import run_demo
 
@@ -216,6 +237,24 @@ def build_parser() -> argparse.ArgumentParser:
     )
     resume.add_argument("run_dir", metavar="RUN_DIR", help="folder of the interrupted run")
     resume.set_defaults(handler=_command_resume)
+
+    mesh = commands.add_parser(
+        "mesh",
+        help="extract RUN_DIR/mesh.ply again from the run's map.pt",
+        description=(
+            "Marching cubes of the saved field over the space the keyframes observed; "
+            "replaces RUN_DIR/mesh.ply (atomically)."
+        ),
+    )
+    mesh.add_argument("run_dir", metavar="RUN_DIR", help="folder of a run (config.yaml, map.pt)")
+    mesh.add_argument(
+        "--resolution",
+        type=_positive_float,
+        metavar="M",
+        help="grid step in metres (default: the run's output.mesh_resolution)",
+    )
+    mesh.add_argument("--device", default="cpu", help="cpu, cuda or cuda:N (default cpu)")
+    mesh.set_defaults(handler=_command_mesh)
 
     demo = commands.add_parser(
         "demo",

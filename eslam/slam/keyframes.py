@@ -167,6 +167,11 @@ class KeyframeStore:
         codes = self._depth[self._check_id(k)].to(self.device if device is None else device)
         return codes.to(torch.float32) / self.depth_units_per_metre
 
+    @property
+    def depth_codes(self) -> torch.Tensor:
+        """(K, H, W) uint16 stored depth, a view: metres = codes / depth_units_per_metre."""
+        return self._depth[: self._count]
+
     def state_dict(self) -> dict:
         """Compact CPU copies of the keyframes (tensors and plain numbers only).
 

@@ -281,9 +281,7 @@ def _finish(
         from eslam.data.mesh_io import write_mesh_ply
         from eslam.mesh.extract import extract_mesh
 
-        mesh = extract_mesh(
-            state.field, config.output.mesh_resolution, state.observed_views(device)
-        )
+        mesh = extract_mesh(state.field, config.output.mesh_resolution, state.observed_views())
         write_mesh_ply(run.mesh, mesh)
     write_json(run.metrics, metrics)
     return RunResult(run_dir=run.root, poses=poses, metrics=metrics)

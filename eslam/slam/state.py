@@ -19,7 +19,7 @@ from eslam.data import RGBDSequence
 from eslam.errors import InputError
 from eslam.field.scene_field import SceneField
 from eslam.io.checkpoint import load_checkpoint, save_checkpoint
-from eslam.mesh.extract import ObservedViews
+from eslam.mesh.observed import ObservedViews
 from eslam.slam.bounds_policy import initial_bound
 from eslam.slam.keyframes import KeyframeStore, make_window_strategy
 
@@ -50,14 +50,19 @@ class SLAMState:
     mapping_time: list[float] = field(default_factory=list)
     bound_warned: bool = False
 
-    def observed_views(self, device: torch.device) -> ObservedViews:
-        """The keyframes as observed space for mesh extraction."""
-        count = len(self.keyframes)
+    def observed_views(self) -> ObservedViews:
+        """The keyframes as observed space for mesh extraction.
+
+        The depth maps stay in the store (uint16 codes on the keyframe device, no copy);
+        observed space reaches T (the field's truncation) behind each measured depth.
+        """
+        store = self.keyframes
         return ObservedViews(
-            poses=torch.stack([self.keyframes.poses[k] for k in range(count)]).to(device),
-            depths=torch.stack([self.keyframes.depth(k, device) for k in range(count)]),
-            intrinsics=self.keyframes.intrinsics,
+            poses=store.poses.clone(),
+            depths=store.depth_codes,
+            intrinsics=store.intrinsics,
             margin=self.field.truncation,
+            depth_scale=1.0 / store.depth_units_per_metre,
         )
 
 

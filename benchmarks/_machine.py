@@ -1,0 +1,77 @@
+"""Shared by the benchmark scripts: the machine description, the command line, and
+appending a section to docs/benchmarks.md."""
+
+from __future__ import annotations
+
+import os
+import platform
+import shlex
+import sys
+from pathlib import Path
+
+import torch
+
+from eslam.atomic import write_text
+
+REPO = Path(__file__).resolve().parents[1]
+DEFAULT_DOCS = REPO / "docs" / "benchmarks.md"
+
+INTRO = """# Benchmarks
+
+Every figure here comes from a command in this repo; the machine is named with each
+table. Sections are appended by the scripts in `benchmarks/` (see
+`benchmarks/README.md`), newest last; the exact command line is given with each table
+so it can be run again. Timings from different machines, thread counts or loads are
+not comparable.
+"""
+
+
+def cpu_model() -> str:
+    """The CPU's model name from /proc/cpuinfo, else what ``platform`` knows."""
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8") as cpuinfo:
+            for line in cpuinfo:
+                if line.lower().startswith("model name"):
+                    return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine() or "unknown CPU"
+
+
+def load_average() -> float | None:
+    """The 1-minute load average (None where the OS has none): other work on the machine."""
+    return os.getloadavg()[0] if hasattr(os, "getloadavg") else None
+
+
+def machine_lines(device: torch.device, load: tuple[float | None, float | None]) -> list[str]:
+    """Bullet lines naming the machine and software the timings were taken on."""
+    lines = [
+        f"- CPU: {cpu_model()}, {os.cpu_count()} logical cores; "
+        f"{platform.system()} {platform.release()} ({platform.machine()})",
+        f"- Python {platform.python_version()}, torch {torch.__version__}, "
+        f"{torch.get_num_threads()} intra-op threads",
+    ]
+    if None not in load:
+        lines.append(
+            f"- 1-minute load average: {load[0]:.1f} at the start, {load[1]:.1f} at the end"
+        )
+    if device.type == "cuda":
+        index = device.index if device.index is not None else torch.cuda.current_device()
+        lines.append(f"- GPU: {torch.cuda.get_device_name(index)} (CUDA {torch.version.cuda})")
+    return lines
+
+
+def append_section(path: Path, section: str) -> None:
+    """Append ``section`` to the markdown file at ``path`` (created with the intro)."""
+    text = path.read_text(encoding="utf-8") if path.exists() else INTRO
+    write_text(path, text.rstrip("\n") + "\n\n" + section)
+
+
+def command_line(script: str, argv: list[str] | None) -> str:
+    """The command that ran ``script`` (e.g. benchmarks/bench_core.py), path relative to
+    the repo root; ``argv`` given = called from Python with those arguments."""
+    if argv is not None:
+        return shlex.join(["python", script, *argv])
+    path = Path(sys.argv[0]).resolve()
+    shown = path.relative_to(REPO).as_posix() if path.is_relative_to(REPO) else sys.argv[0]
+    return shlex.join(["python", shown, *sys.argv[1:]])
