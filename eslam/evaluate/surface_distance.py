@@ -25,6 +25,9 @@ from eslam.evaluate.point_triangle import point_triangle_distance
 
 _CHUNK = 32768
 """Query points per batch: bounds the memory of the candidate pairs."""
+_MAX_PIECES_PER_TRIANGLE = 16
+_MIN_PIECE_BUDGET = 1_000_000
+"""Pieces allowed in all: max(16 per triangle, one million); beyond, pieces grow."""
 _RADIUS_SLACK = 1e-9
 """Metres added to the search radius against rounding (the bound is exact in reals)."""
 
@@ -80,7 +83,8 @@ def build_surface_index(
         vertices: (V, 3) float, metres.
         faces: (F, 3) int vertex indices, F >= 1.
         piece_radius: the largest reach of a piece, metres; default the median
-            triangle radius (most triangles stay whole, large ones are cut up).
+            triangle radius (most triangles stay whole, large ones are cut up). It is
+            raised when it would need more than max(16 F, 10^6) pieces.
 
     Returns:
         The index.
@@ -91,8 +95,13 @@ def build_surface_index(
     radius = _triangle_radius(triangles)
     if piece_radius is None:
         piece_radius = float(np.median(radius))
-    piece_radius = max(piece_radius, 1e-6 * max(float(radius.max()), 1e-12), 1e-12)
-    splits = np.maximum(np.ceil(radius / piece_radius).astype(np.int64), 1)
+    piece_radius = max(piece_radius, 1e-12)
+    limit = max(_MAX_PIECES_PER_TRIANGLE * len(triangles), _MIN_PIECE_BUDGET)
+    splits = np.maximum(np.ceil(radius / piece_radius), 1)
+    while np.sum(splits**2) > limit:  # a tiny radius on large triangles: coarsen
+        piece_radius *= 1.5
+        splits = np.maximum(np.ceil(radius / piece_radius), 1)
+    splits = splits.astype(np.int64)
     centroids, owners = [], []
     for count in np.unique(splits):
         chosen = np.flatnonzero(splits == count)
