@@ -107,6 +107,8 @@ def absolute_trajectory_error(
     Raises:
         ValueError: fewer than 3 usable pairs.
     """
+    estimated = np.asarray(estimated, dtype=np.float64)
+    ground_truth = np.asarray(ground_truth, dtype=np.float64)
     est = estimated[:, :3, 3] if estimated.ndim == 3 else estimated
     gt = ground_truth[:, :3, 3] if ground_truth.ndim == 3 else ground_truth
     if estimated.ndim == 3:
