@@ -148,6 +148,142 @@ def _command_demo(args: argparse.Namespace) -> int:
     return 0
 
 
+def _non_negative_float(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got '{text}'") from None
+    if not value >= 0:
+        raise argparse.ArgumentTypeError(f"expected a number >= 0, got '{text}'")
+    return value
+
+
+def _command_ate(args: argparse.Namespace) -> int:
+    from eslam.errors import InputError
+    from eslam.evaluate.report import titled_table
+    from eslam.evaluate.trajectory import TimedPoses, trajectory_ate
+    from eslam.io.run_dir import json_text
+    from eslam.io.trajectory import read_trajectory
+
+    gt = TimedPoses(*read_trajectory(args.gt, ground_truth=True, allow_missing=True))
+    est = TimedPoses(*read_trajectory(args.est, allow_missing=True))
+    try:
+        result = trajectory_ate(gt, est, args.align == "sim3", args.max_diff)
+    except ValueError as error:
+        raise InputError(
+            args.est, str(error), "check that both files cover the same frames, or --max-diff"
+        ) from None
+    metrics = {**result.as_dict(), "align": args.align, "max_diff_s": args.max_diff}
+    if args.json:
+        print(json_text({**metrics, "gt": args.gt, "est": args.est}))
+    else:
+        print(titled_table(f"ATE of {args.est} against {args.gt}", metrics))
+    return 0
+
+
+def _command_recon(args: argparse.Namespace) -> int:
+    from eslam.errors import ConfigError, InputError
+    from eslam.evaluate.depth_l1 import DepthL1Options, depth_l1
+    from eslam.evaluate.reconstruction import ReconstructionOptions, evaluate_reconstruction
+    from eslam.evaluate.report import titled_table
+    from eslam.io.mesh_files import find_mesh, read_mesh
+    from eslam.io.run_dir import json_text
+
+    rec_path, gt_path = find_mesh(args.rec), find_mesh(args.gt)
+    reconstruction, ground_truth = read_mesh(rec_path), read_mesh(gt_path)
+    options = ReconstructionOptions(samples=args.samples, seed=args.seed, exact=args.exact)
+    try:
+        metrics: dict[str, object] = evaluate_reconstruction(
+            reconstruction, ground_truth, options
+        ).as_dict()
+    except ValueError as error:
+        raise InputError(rec_path, str(error), "check both meshes have triangles") from None
+    if args.depth_l1:
+        uncut = read_mesh(args.gt_uncut) if args.gt_uncut else None
+        depth_options = DepthL1Options(views=args.views, seed=args.seed)
+        try:
+            metrics.update(depth_l1(reconstruction, ground_truth, depth_options, uncut).as_dict())
+        except ImportError as error:
+            raise ConfigError(f"--depth-l1: {error}") from None
+    if args.json:
+        print(json_text({**metrics, "rec": rec_path, "gt": gt_path}))
+    else:
+        print(titled_table(f"reconstruction {rec_path} against {gt_path}", metrics))
+    return 0
+
+
+def _add_evaluation_commands(commands: argparse._SubParsersAction) -> None:
+    from eslam.evaluate.depth_l1 import RELEASE_VIEWS
+    from eslam.evaluate.reconstruction import RELEASE_SAMPLES
+
+    ate = commands.add_parser(
+        "ate",
+        help="absolute trajectory error between two trajectories (any system's)",
+        description=(
+            "ATE after Umeyama alignment of the estimate onto the ground truth: RMSE, mean, "
+            "median, max (cm). GT and EST are TUM files (timestamp tx ty tz qx qy qz qw), "
+            "Replica traj.txt files (16 numbers per line; timestamps = line numbers) or run "
+            "folders (GT reads trajectory_gt.txt, EST trajectory.txt). Poses are matched by "
+            "timestamp; pairs with a missing (nan/inf) pose are left out and counted."
+        ),
+    )
+    ate.add_argument("gt", metavar="GT", help="ground-truth trajectory file or run folder")
+    ate.add_argument("est", metavar="EST", help="estimated trajectory file or run folder")
+    ate.add_argument(
+        "--align",
+        choices=("se3", "sim3"),
+        default="se3",
+        help="rigid (se3, the paper's) or similarity (sim3) alignment",
+    )
+    ate.add_argument(
+        "--max-diff",
+        type=_non_negative_float,
+        default=0.01,
+        metavar="S",
+        help="largest timestamp difference of a matched pair, seconds (default 0.01)",
+    )
+    ate.add_argument("--json", action="store_true", help="print JSON instead of a table")
+    ate.set_defaults(handler=_command_ate)
+
+    recon = commands.add_parser(
+        "recon",
+        help="accuracy / completion / ratio / F1 (and depth L1) of a mesh against a GT mesh",
+        description=(
+            "Sample both meshes (area-weighted, seeded) and measure accuracy (rec to GT), "
+            "completion (GT to rec), completion ratio (< 5 cm), precision / recall / F1 "
+            "(< 1 cm). REC and GT are mesh files or run folders (mesh_culled.ply, else "
+            "mesh.ply). --exact measures distances to the other mesh's triangles instead of "
+            "its samples; --depth-l1 adds the depth L1 over random virtual views."
+        ),
+    )
+    recon.add_argument("rec", metavar="REC", help="reconstructed mesh or run folder")
+    recon.add_argument("gt", metavar="GT", help="ground-truth mesh or run folder")
+    recon.add_argument("--exact", action="store_true", help="distances to the other surface")
+    recon.add_argument(
+        "--samples",
+        type=_positive_int,
+        default=RELEASE_SAMPLES,
+        metavar="N",
+        help=f"points sampled per mesh (default {RELEASE_SAMPLES}, the ESLAM protocol)",
+    )
+    recon.add_argument("--seed", type=int, default=0, help="seed of samples and views")
+    recon.add_argument("--depth-l1", action="store_true", help="also the depth L1 (slower)")
+    recon.add_argument(
+        "--views",
+        type=_positive_int,
+        default=RELEASE_VIEWS,
+        metavar="N",
+        help=f"virtual views of the depth L1 (default {RELEASE_VIEWS})",
+    )
+    recon.add_argument(
+        "--gt-uncut",
+        metavar="PATH",
+        help="the GT mesh before culling: depth L1 views that see culled-away space are redrawn",
+    )
+    recon.add_argument("--json", action="store_true", help="print JSON instead of a table")
+    recon.set_defaults(handler=_command_recon)
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The ``eslam`` argument parser with every sub-command."""
     parser = _Parser(
@@ -267,6 +403,7 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--out", default="out/demo", help="output folder (default out/demo)")
     demo.add_argument("overrides", nargs="*", metavar="key=value", help="config overrides")
     demo.set_defaults(handler=_command_demo)
+    _add_evaluation_commands(commands)
     return parser
 
 

@@ -2,15 +2,20 @@
 
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+import trimesh
+from scipy.spatial.transform import Rotation
 
 from eslam.cli import EXIT_USER_ERROR, main
+from eslam.data.mesh_io import TriangleMesh, read_mesh_ply, write_mesh_ply
 from eslam.data.replica import ReplicaSequence
+from eslam.io.trajectory import write_tum_trajectory
 
 
 def _one_line_error(capsys: pytest.CaptureFixture[str]) -> str:
@@ -20,7 +25,7 @@ def _one_line_error(capsys: pytest.CaptureFixture[str]) -> str:
     return err
 
 
-@pytest.mark.parametrize("command", [[], ["synth"], ["inspect"]])
+@pytest.mark.parametrize("command", [[], ["synth"], ["inspect"], ["ate"], ["recon"]])
 def test_help(command: list[str], capsys: pytest.CaptureFixture[str]) -> None:
     with pytest.raises(SystemExit) as exit_info:
         main([*command, "--help"])
@@ -114,3 +119,121 @@ def test_console_script_runs_without_traceback(tmp_path: Path) -> None:
     assert result.returncode == EXIT_USER_ERROR
     assert result.stderr.count("\n") == 1 and "Traceback" not in result.stderr
     assert "nope: folder not found" in result.stderr
+
+
+def _write_tum(path: Path, times: np.ndarray, positions: np.ndarray) -> None:
+    poses = np.tile(np.eye(4), (len(times), 1, 1))
+    poses[:, :3, 3] = positions
+    write_tum_trajectory(path, times, poses)
+
+
+def test_ate_command_table_json_and_run_folders(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    rng = np.random.default_rng(0)
+    positions = np.cumsum(rng.normal(scale=0.05, size=(20, 3)), axis=0)
+    rotation = Rotation.from_rotvec([0.2, 0.5, -1.0]).as_matrix()
+    _write_tum(tmp_path / "gt.txt", np.arange(20.0), positions)
+    _write_tum(tmp_path / "est.txt", np.arange(20.0) + 0.003, positions @ rotation.T + 2.0)
+    assert main(["ate", str(tmp_path / "gt.txt"), str(tmp_path / "est.txt")]) == 0
+    table = capsys.readouterr().out
+    assert "ate_rmse_cm" in table and "pairs" in table and "20" in table
+
+    run = tmp_path / "run"
+    _write_tum(run / "trajectory_gt.txt", np.arange(20.0), positions)
+    _write_tum(run / "trajectory.txt", np.arange(20.0), 2.0 * positions)
+    assert main(["ate", str(run), str(run), "--align", "sim3", "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["pairs"] == 20 and report["ate_rmse_cm"] < 1e-9
+    assert report["scale"] == pytest.approx(0.5) and report["align"] == "sim3"
+    assert main(["ate", str(run), str(run), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["ate_rmse_cm"] > 1.0  # se3 cannot scale
+
+
+@pytest.mark.parametrize(
+    ("arguments", "message"),
+    [
+        (["missing.txt", "est.txt"], "missing.txt: not found"),
+        (["gt.txt", "late.txt"], "only 0 poses matched within 0.01 s"),
+        (["gt.txt", "est.txt", "--align", "affine"], "invalid choice: 'affine'"),
+        (["gt.txt", "est.txt", "--max-diff", "-1"], "expected a number >= 0"),
+    ],
+)
+def test_ate_command_errors(
+    arguments: list[str], message: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    positions = np.random.default_rng(1).normal(size=(5, 3))
+    _write_tum(tmp_path / "gt.txt", np.arange(5.0), positions)
+    _write_tum(tmp_path / "est.txt", np.arange(5.0), positions)
+    _write_tum(tmp_path / "late.txt", np.arange(5.0) + 0.5, positions)
+    paths = [str(tmp_path / a) if a.endswith(".txt") else a for a in arguments]
+    try:
+        status = main(["ate", *paths])
+    except SystemExit as exit_info:
+        status = exit_info.code
+    assert status == EXIT_USER_ERROR
+    assert message in _one_line_error(capsys)
+
+
+def _sphere_mesh(radius: float) -> TriangleMesh:
+    sphere = trimesh.creation.icosphere(subdivisions=3, radius=radius)
+    vertices = np.asarray(sphere.vertices)
+    return TriangleMesh(vertices, np.asarray(sphere.faces), np.zeros(vertices.shape, np.uint8))
+
+
+def test_recon_command_exact_and_depth_l1(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    write_mesh_ply(tmp_path / "gt.ply", _sphere_mesh(1.0))
+    write_mesh_ply(tmp_path / "run" / "mesh.ply", _sphere_mesh(1.0))
+    arguments = ["recon", str(tmp_path / "run"), str(tmp_path / "gt.ply"), "--samples", "3000"]
+    assert main([*arguments, "--exact", "--depth-l1", "--views", "2", "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["accuracy_cm"] < 1e-9 and report["completion_ratio_pct"] == 100.0
+    assert report["samples"] == 3000 and report["exact"] is True
+    assert report["depth_l1_cm"] == 0.0 and report["views_used"] == 2
+    assert report["rec"].endswith("mesh.ply")
+    assert main(arguments) == 0
+    table = capsys.readouterr().out
+    assert "accuracy_cm" in table and "exact" in table and "depth_l1_cm" not in table
+
+
+@pytest.mark.parametrize(
+    ("arguments", "message"),
+    [
+        (["nothing.ply", "gt.ply"], "nothing.ply: not found"),
+        (["empty_run", "gt.ply"], "empty_run: holds no mesh_culled.ply or mesh.ply"),
+        (["gt.ply", "gt.ply", "--samples", "0"], "expected a positive integer, got '0'"),
+    ],
+)
+def test_recon_command_errors(
+    arguments: list[str], message: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    write_mesh_ply(tmp_path / "gt.ply", _sphere_mesh(1.0))
+    (tmp_path / "empty_run").mkdir()
+    paths = [a if a.startswith("-") or a.isdigit() else str(tmp_path / a) for a in arguments]
+    try:
+        status = main(["recon", *paths])
+    except SystemExit as exit_info:
+        status = exit_info.code
+    assert status == EXIT_USER_ERROR
+    assert message in _one_line_error(capsys)
+
+
+@pytest.mark.realdata
+def test_recon_office0_exact_against_itself_and_one_centimetre_off(
+    real_data: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    gt_path = real_data / "replica-office0" / "office0_mesh.ply"
+    options = ["--exact", "--samples", "100000", "--json"]
+    assert main(["recon", str(gt_path), str(gt_path), *options]) == 0
+    itself = json.loads(capsys.readouterr().out)
+    assert itself["accuracy_cm"] < 1e-10 and itself["completion_cm"] < 1e-10
+    assert itself["completion_ratio_pct"] == 100.0
+    gt = read_mesh_ply(gt_path)
+    normals = trimesh.Trimesh(gt.vertices, gt.faces, process=False).vertex_normals
+    displaced = TriangleMesh(gt.vertices + 0.01 * normals, gt.faces, gt.colours)
+    write_mesh_ply(tmp_path / "displaced.ply", displaced)
+    assert main(["recon", str(tmp_path / "displaced.ply"), str(gt_path), *options]) == 0
+    off = json.loads(capsys.readouterr().out)
+    assert abs(off["accuracy_cm"] - 1.0) < 0.1 and abs(off["completion_cm"] - 1.0) < 0.1

@@ -58,6 +58,28 @@ def metrics_text(metrics: Mapping[str, object]) -> str:
     return "\n".join(lines)
 
 
+def titled_table(title: str, metrics: Mapping[str, object]) -> str:
+    """A title line and one aligned ``name  value`` line per entry (any keys, in order).
+
+    Example::
+
+        ATE (se3 alignment)
+          ate_rmse_cm     1.3470
+          pairs           785
+    """
+    width = max((len(name) for name in metrics), default=0)
+    lines = [title]
+    for name, value in metrics.items():
+        if isinstance(value, bool):
+            shown = "yes" if value else "no"
+        elif isinstance(value, float):
+            shown = f"{value:.4f}"
+        else:
+            shown = str(value)
+        lines.append(f"  {name:<{width}}  {shown}")
+    return "\n".join(lines)
+
+
 def write_report(
     path: str | Path,
     title: str,

@@ -22,7 +22,15 @@ class Alignment:
 
 @dataclass(frozen=True)
 class ATEResult:
-    """ATE statistics in metres over ``pairs`` matched positions."""
+    """ATE statistics in metres over ``pairs`` matched positions.
+
+    Attributes:
+        rmse, mean, median, max: of the position errors after alignment, metres.
+        pairs: matched poses used.
+        alignment: the transform applied to the estimate.
+        errors: (pairs,) position errors, metres.
+        excluded: matched pairs left out because a pose was not finite (missing).
+    """
 
     rmse: float
     mean: float
@@ -31,10 +39,23 @@ class ATEResult:
     pairs: int
     alignment: Alignment
     errors: np.ndarray
+    excluded: int = 0
 
     def as_cm(self) -> dict[str, float]:
         """The statistics in centimetres, with the keys metrics.json uses."""
         return {"ate_rmse_cm": 100 * self.rmse, "ate_mean_cm": 100 * self.mean}
+
+    def as_dict(self) -> dict[str, float | int]:
+        """Every statistic (centimetres), the pair counts and the alignment scale."""
+        return {
+            "ate_rmse_cm": 100 * self.rmse,
+            "ate_mean_cm": 100 * self.mean,
+            "ate_median_cm": 100 * self.median,
+            "ate_max_cm": 100 * self.max,
+            "pairs": self.pairs,
+            "excluded": self.excluded,
+            "scale": self.alignment.scale,
+        }
 
 
 def umeyama_alignment(
@@ -79,10 +100,21 @@ def absolute_trajectory_error(
     Args:
         estimated: (N, 3) positions or (N, 4, 4) camera-to-world poses.
         ground_truth: the same shape, matched row by row. Rows where either is not
-            finite are left out (e.g. ScanNet's invalid poses).
+            finite are left out (e.g. ScanNet's invalid poses) and counted in
+            ``excluded``.
+        with_scale: Sim(3) alignment (also fit a scale) instead of SE(3).
+
+    Raises:
+        ValueError: fewer than 3 usable pairs.
     """
+    estimated = np.asarray(estimated, dtype=np.float64)
+    ground_truth = np.asarray(ground_truth, dtype=np.float64)
     est = estimated[:, :3, 3] if estimated.ndim == 3 else estimated
     gt = ground_truth[:, :3, 3] if ground_truth.ndim == 3 else ground_truth
+    if estimated.ndim == 3:
+        est = np.where(np.isfinite(estimated).all(axis=(1, 2))[:, None], est, np.nan)
+    if ground_truth.ndim == 3:
+        gt = np.where(np.isfinite(ground_truth).all(axis=(1, 2))[:, None], gt, np.nan)
     keep = np.isfinite(est).all(axis=1) & np.isfinite(gt).all(axis=1)
     est, gt = est[keep].astype(np.float64), gt[keep].astype(np.float64)
     alignment = umeyama_alignment(est, gt, with_scale)
@@ -95,7 +127,53 @@ def absolute_trajectory_error(
         pairs=len(errors),
         alignment=alignment,
         errors=errors,
+        excluded=int(np.count_nonzero(~keep)),
     )
+
+
+@dataclass(frozen=True, eq=False)
+class TimedPoses:
+    """A trajectory: camera-to-world poses with their timestamps.
+
+    Attributes:
+        timestamps: (N,) float64 seconds (or frame indices).
+        poses: (N, 4, 4) float64 camera-to-world; all-NaN rows are missing poses.
+    """
+
+    timestamps: np.ndarray
+    poses: np.ndarray
+
+
+def trajectory_ate(
+    ground_truth: TimedPoses,
+    estimate: TimedPoses,
+    with_scale: bool = False,
+    max_difference: float = 0.01,
+) -> ATEResult:
+    """ATE of two timestamped trajectories, as evo's ``evo_ape tum GT EST -a`` computes it.
+
+    Poses are matched by :func:`associate_timestamps` (within ``max_difference``
+    seconds; evo's default is 0.01), pairs with a missing (non-finite) pose are left
+    out, then :func:`absolute_trajectory_error` aligns and measures the positions.
+
+    Raises:
+        ValueError: fewer than 3 usable pairs (the message says how many matched).
+    """
+    est_index, gt_index = associate_timestamps(
+        estimate.timestamps, ground_truth.timestamps, max_difference
+    )
+    matched = len(est_index)
+    est = estimate.poses[est_index]
+    gt = ground_truth.poses[gt_index]
+    usable = int(
+        np.count_nonzero(np.isfinite(est).all(axis=(1, 2)) & np.isfinite(gt).all(axis=(1, 2)))
+    )
+    if usable < 3:
+        raise ValueError(
+            f"only {matched} poses matched within {max_difference} s and {usable} of them "
+            "have finite poses; need at least 3"
+        )
+    return absolute_trajectory_error(est, gt, with_scale)
 
 
 def associate_timestamps(

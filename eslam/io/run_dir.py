@@ -161,8 +161,12 @@ def write_json(path: str | Path, obj: object) -> None:
     Raises:
         TypeError: a value JSON cannot hold (the error names its type).
     """
-    text = json.dumps(_plain(obj), indent=2, sort_keys=True, allow_nan=False)
-    write_text(path, text + "\n")
+    write_text(path, json_text(obj) + "\n")
+
+
+def json_text(obj: object) -> str:
+    """``obj`` as JSON text the way :func:`write_json` writes it (no trailing newline)."""
+    return json.dumps(_plain(obj), indent=2, sort_keys=True, allow_nan=False)
 
 
 def read_json(path: str | Path) -> object:

@@ -19,6 +19,7 @@ import numpy as np
 import torch
 
 from eslam.atomic import write_text
+from eslam.data.base import check_pose
 from eslam.data.replica import read_traj
 from eslam.errors import InputError
 from eslam.geometry.rotation import (
@@ -35,6 +36,8 @@ REPLICA_COLUMNS = 16
 """Numbers per line of a Replica ``traj.txt`` (a row-major 4x4 camera-to-world pose)."""
 RUN_TRAJECTORY = "trajectory.txt"
 """Estimated trajectory of a run folder (see :mod:`eslam.io.run_dir`)."""
+RUN_TRAJECTORY_GT = "trajectory_gt.txt"
+"""Ground-truth trajectory of a run folder (see :mod:`eslam.io.run_dir`)."""
 _MIN_QUATERNION_NORM = 1e-12
 
 
@@ -98,23 +101,36 @@ def _data_lines(path: Path) -> list[tuple[int, list[str]]]:
     return lines
 
 
-def _parse_numbers(path: Path, number: int, fields: list[str]) -> list[float]:
+def _parse_numbers(
+    path: Path, number: int, fields: list[str], allow_missing: bool = False
+) -> list[float]:
     values = []
     for field in fields:
         try:
             values.append(float(field))
         except ValueError:
             raise InputError(path, f"line {number}: '{field}' is not a number") from None
-    if not all(np.isfinite(values)):
-        raise InputError(path, f"line {number}: holds a non-finite value (nan or inf)")
+    if not allow_missing and not all(np.isfinite(values)):
+        raise InputError(
+            path,
+            f"line {number}: holds a non-finite value (nan or inf)",
+            "fix that pose, or pass allow_missing=True to read it as a missing pose",
+        )
     return values
 
 
-def read_tum_trajectory(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
+def read_tum_trajectory(
+    path: str | Path, allow_missing: bool = False
+) -> tuple[np.ndarray, np.ndarray]:
     """Read a TUM trajectory (``timestamp tx ty tz qx qy qz qw`` per line).
 
     Blank lines and ``#`` comments are skipped; commas count as spaces. Quaternions
     are normalised.
+
+    Args:
+        path: the file.
+        allow_missing: read a line whose pose holds nan or inf as a missing pose (all
+            NaN) instead of failing; its timestamp must still be finite.
 
     Returns:
         timestamps (N,) float64 seconds and poses (N, 4, 4) float64 camera-to-world.
@@ -132,27 +148,56 @@ def read_tum_trajectory(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
                 f"line {number}: expected 8 numbers (timestamp tx ty tz qx qy qz qw), "
                 f"got {len(fields)}",
             )
-        values = _parse_numbers(path, number, fields)
-        if np.linalg.norm(values[4:]) < _MIN_QUATERNION_NORM:
+        values = _parse_numbers(path, number, fields, allow_missing)
+        if not np.isfinite(values[0]):
+            raise InputError(path, f"line {number}: the timestamp is not finite")
+        finite = all(np.isfinite(values))
+        if finite and np.linalg.norm(values[4:]) < _MIN_QUATERNION_NORM:
             raise InputError(path, f"line {number}: the quaternion is zero")
-        rows.append(values)
+        rows.append(values if finite else [values[0], *([np.nan] * 7)])
     table = np.array(rows, dtype=np.float64)
-    quaternions = table[:, 4:] / np.linalg.norm(table[:, 4:], axis=1, keepdims=True)
+    missing = ~np.isfinite(table[:, 1:]).all(axis=1)
+    quaternions = table[:, 4:].copy()
+    quaternions[missing] = [0.0, 0.0, 0.0, 1.0]
+    quaternions /= np.linalg.norm(quaternions, axis=1, keepdims=True)
     poses = np.tile(np.eye(4), (len(table), 1, 1))
     poses[:, :3, :3] = quaternion_to_matrix(torch.from_numpy(quaternions)).numpy()
     poses[:, :3, 3] = table[:, 1:4]
+    poses[missing] = np.nan
     return table[:, 0].copy(), poses
 
 
-def read_trajectory(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
+def _read_replica_with_missing(path: Path) -> np.ndarray:
+    """A Replica ``traj.txt`` whose non-finite lines become all-NaN (missing) poses."""
+    poses = []
+    for number, fields in _data_lines(path):
+        if len(fields) != REPLICA_COLUMNS:
+            raise InputError(path, f"line {number}: expected 16 numbers, got {len(fields)}")
+        pose = np.array(_parse_numbers(path, number, fields, True)).reshape(4, 4)
+        if np.isfinite(pose).all():
+            poses.append(check_pose(pose, path, f"line {number}"))
+        else:
+            poses.append(np.full((4, 4), np.nan))
+    return np.stack(poses)
+
+
+def read_trajectory(
+    path: str | Path, ground_truth: bool = False, allow_missing: bool = False
+) -> tuple[np.ndarray, np.ndarray]:
     """Read a trajectory in any format we know, told apart by its column count.
 
     Accepted:
         - a TUM file (8 numbers per line);
         - a Replica ``traj.txt`` (16 numbers per line); timestamps are the line indices
           (0, 1, 2, ...), which is what a run writes for a sequence without time stamps;
-        - a run folder (its ``trajectory.txt``) or a Replica sequence folder (its
-          ``traj.txt``).
+        - a run folder: its ``trajectory.txt`` (its ``trajectory_gt.txt`` with
+          ``ground_truth``), or a Replica sequence folder (its ``traj.txt``).
+
+    Args:
+        path: a file or folder as above.
+        ground_truth: in a run folder, read the ground truth, not the estimate.
+        allow_missing: read poses holding nan or inf as missing (all NaN) poses
+            (ScanNet marks frames without ground truth so) instead of failing.
 
     Returns:
         timestamps (N,) float64 and poses (N, 4, 4) float64 camera-to-world.
@@ -162,19 +207,20 @@ def read_trajectory(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
     """
     path = Path(path)
     if path.is_dir():
-        for name in (RUN_TRAJECTORY, "traj.txt"):
+        run_file = RUN_TRAJECTORY_GT if ground_truth else RUN_TRAJECTORY
+        for name in (run_file, "traj.txt"):
             if (path / name).is_file():
-                return read_trajectory(path / name)
+                return read_trajectory(path / name, ground_truth, allow_missing)
         raise InputError(
             path,
-            f"holds no {RUN_TRAJECTORY} (run folder) or traj.txt (Replica sequence)",
+            f"holds no {run_file} (run folder) or traj.txt (Replica sequence)",
             "pass a trajectory file or a run folder",
         )
     number, fields = _data_lines(path)[0]
     if len(fields) == TUM_COLUMNS:
-        return read_tum_trajectory(path)
+        return read_tum_trajectory(path, allow_missing)
     if len(fields) == REPLICA_COLUMNS:
-        poses = read_traj(path)
+        poses = _read_replica_with_missing(path) if allow_missing else read_traj(path)
         return np.arange(len(poses), dtype=np.float64), poses
     raise InputError(
         path,

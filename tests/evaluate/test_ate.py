@@ -9,10 +9,13 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from eslam.evaluate.trajectory import (
+    TimedPoses,
     absolute_trajectory_error,
     associate_timestamps,
+    trajectory_ate,
     umeyama_alignment,
 )
+from eslam.io.trajectory import read_trajectory
 
 
 def test_rotated_and_shifted_trajectory_has_zero_error() -> None:
@@ -100,3 +103,77 @@ def test_evo_reference_values(
         assert abs(result.mean - mean) < 1e-5
     similarity = absolute_trajectory_error(estimate[i, 1:4], ground_truth[j, 1:4], with_scale=True)
     assert abs(similarity.rmse - rmse_sim3) < 1e-5
+
+
+def test_median_and_max_match_an_independent_kabsch_alignment() -> None:
+    """scipy's Rotation.align_vectors solves the same rigid fit (Kabsch) on centred points."""
+    rng = np.random.default_rng(4)
+    gt = rng.normal(size=(40, 3))
+    rotation = Rotation.from_rotvec([0.4, -0.2, 0.9]).as_matrix()
+    estimate = gt @ rotation.T + [0.5, 0.1, -2.0] + rng.normal(scale=0.02, size=gt.shape)
+    fit, _ = Rotation.align_vectors(gt - gt.mean(axis=0), estimate - estimate.mean(axis=0))
+    aligned = fit.apply(estimate - estimate.mean(axis=0)) + gt.mean(axis=0)
+    errors = np.linalg.norm(aligned - gt, axis=1)
+    result = absolute_trajectory_error(estimate, gt)
+    assert result.median == pytest.approx(np.median(errors), abs=1e-12)
+    assert result.max == pytest.approx(errors.max(), abs=1e-12)
+    assert result.mean == pytest.approx(errors.mean(), abs=1e-12)
+    assert result.rmse == pytest.approx(np.sqrt(np.mean(errors**2)), abs=1e-12)
+    assert 0.01 < result.median < result.max
+
+
+def _timed(times: np.ndarray, positions: np.ndarray) -> TimedPoses:
+    poses = np.tile(np.eye(4), (len(times), 1, 1))
+    poses[:, :3, 3] = positions
+    return TimedPoses(times, poses)
+
+
+def test_missing_ground_truth_poses_are_excluded_and_counted() -> None:
+    rng = np.random.default_rng(6)
+    positions = np.cumsum(rng.normal(scale=0.1, size=(30, 3)), axis=0)
+    rotation = Rotation.from_rotvec([0.1, 0.2, -0.3]).as_matrix()
+    gt = _timed(np.arange(30.0), positions)
+    gt.poses[[4, 9, 17]] = np.nan
+    estimate = _timed(np.arange(30.0) + 0.004, positions @ rotation.T + 1.0)
+    estimate.poses[2, 0, 0] = np.inf  # a broken estimate counts as missing too
+    result = trajectory_ate(gt, estimate)
+    assert result.pairs == 26 and result.excluded == 4 and result.rmse < 1e-12
+    assert result.as_dict()["excluded"] == 4 and result.as_dict()["pairs"] == 26
+
+
+def test_association_window_and_too_few_pairs() -> None:
+    positions = np.random.default_rng(7).normal(size=(10, 3))
+    gt = _timed(np.arange(10.0), positions)
+    late = _timed(np.arange(10.0) + 0.02, positions)
+    with pytest.raises(ValueError, match=r"only 0 poses matched within 0\.01 s"):
+        trajectory_ate(gt, late)
+    assert trajectory_ate(gt, late, max_difference=0.03).pairs == 10
+
+
+@pytest.mark.realdata
+@pytest.mark.parametrize(
+    ("gt", "est", "pairs", "rmse", "max_error", "rmse_sim3"),
+    [
+        (
+            "freiburg1_xyz-groundtruth.txt",
+            "freiburg1_xyz-rgbdslam.txt",
+            785,
+            0.01347,
+            0.03476,
+            0.013389,
+        ),
+        ("fr2_desk_groundtruth.txt", "fr2_desk_ORB.txt", 2174, 0.008119, 0.0243, 0.006123),
+    ],
+)
+def test_evo_reference_values_from_files(
+    real_data: Path, gt, est, pairs, rmse, max_error, rmse_sim3
+) -> None:
+    """The file path the `eslam ate` command takes: read_trajectory, then trajectory_ate."""
+    folder = real_data / "tum-trajectories"
+    ground_truth = TimedPoses(*read_trajectory(folder / gt, ground_truth=True))
+    estimate = TimedPoses(*read_trajectory(folder / est))
+    result = trajectory_ate(ground_truth, estimate)
+    assert result.pairs == pairs and result.excluded == 0
+    assert abs(result.rmse - rmse) < 1e-5 and abs(result.max - max_error) < 1e-5
+    assert result.median <= result.rmse
+    assert abs(trajectory_ate(ground_truth, estimate, with_scale=True).rmse - rmse_sim3) < 1e-5

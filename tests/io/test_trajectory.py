@@ -174,3 +174,42 @@ def test_read_real_tum_files(
     again_times, again = read_tum_trajectory(tmp_path / name)
     np.testing.assert_array_equal(again_times, times)
     np.testing.assert_allclose(again, poses, rtol=0, atol=1e-9)
+
+
+def test_run_folder_ground_truth_and_replica_fallback(tmp_path: Path) -> None:
+    poses = _random_poses(5)
+    run = tmp_path / "run"
+    write_tum_trajectory(run / "trajectory.txt", np.arange(5.0), poses)
+    write_tum_trajectory(run / "trajectory_gt.txt", np.arange(5.0), poses[::-1])
+    np.testing.assert_allclose(read_trajectory(run)[1], poses, atol=1e-9)
+    np.testing.assert_allclose(read_trajectory(run, ground_truth=True)[1], poses[::-1], atol=1e-9)
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(InputError, match=r"empty: holds no trajectory_gt\.txt"):
+        read_trajectory(tmp_path / "empty", ground_truth=True)
+
+
+def test_missing_poses_are_read_as_nan_only_when_allowed(tmp_path: Path) -> None:
+    tum = tmp_path / "tum.txt"
+    tum.write_text("0 1 2 3 0 0 0 1\n1 nan nan nan nan nan nan nan\n2 0 0 inf 0 0 0 1\n")
+    with pytest.raises(InputError, match="line 2: holds a non-finite value"):
+        read_trajectory(tum)
+    times, poses = read_trajectory(tum, allow_missing=True)
+    np.testing.assert_array_equal(times, [0.0, 1.0, 2.0])
+    np.testing.assert_array_equal(poses[0, :3, 3], [1.0, 2.0, 3.0])
+    assert np.isnan(poses[1]).all() and np.isnan(poses[2]).all()
+    (tmp_path / "bad_time.txt").write_text("nan 0 0 0 0 0 0 1\n")
+    with pytest.raises(InputError, match="line 1: the timestamp is not finite"):
+        read_trajectory(tmp_path / "bad_time.txt", allow_missing=True)
+
+    replica = tmp_path / "traj.txt"
+    rows = [" ".join(map(str, np.eye(4).ravel())), " ".join(["-inf"] * 16)]
+    replica.write_text("\n".join(rows) + "\n")
+    with pytest.raises(InputError, match="non-finite"):
+        read_trajectory(replica)
+    times, poses = read_trajectory(replica, allow_missing=True)
+    np.testing.assert_array_equal(times, [0.0, 1.0])
+    np.testing.assert_array_equal(poses[0], np.eye(4))
+    assert np.isnan(poses[1]).all()
+    replica.write_text(" ".join(["2"] * 16) + "\n")  # finite but not rigid: still an error
+    with pytest.raises(InputError, match="not a rigid transform"):
+        read_trajectory(replica, allow_missing=True)
