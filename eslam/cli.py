@@ -142,9 +142,33 @@ def _command_mesh(args: argparse.Namespace) -> int:
 
 
 def _command_demo(args: argparse.Namespace) -> int:
-    from eslam.slam.demo import run_demo
+    from eslam.evaluate.report import metrics_text
+    from eslam.workflows.demo import run_demo
 
-    _print_metrics(run_demo(Path(args.out), tuple(args.overrides)))
+    result = run_demo(Path(args.out), tuple(args.overrides))
+    print(f"run folder: {result.run_dir} (report.md holds the table and plots)")
+    print(metrics_text(result.metrics))
+    return 0
+
+
+def _command_eval(args: argparse.Namespace) -> int:
+    from eslam.evaluate.report import metrics_text
+    from eslam.workflows.evaluate_run import EvaluationOptions, evaluate_run
+
+    options = EvaluationOptions(
+        gt_mesh=Path(args.gt_mesh) if args.gt_mesh else None,
+        protocol=args.protocol,
+        samples=args.samples,
+        exact=args.exact,
+        depth_l1_views=args.views,
+        seed=args.seed,
+        cull_every=args.cull_every,
+        max_unobserved_fraction=args.max_unobserved,
+        device=args.device,
+    )
+    metrics = evaluate_run(args.run_dir, options)
+    print(f"wrote {Path(args.run_dir) / 'metrics.json'} and report.md")
+    print(metrics_text(metrics))
     return 0
 
 
@@ -403,6 +427,41 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--out", default="out/demo", help="output folder (default out/demo)")
     demo.add_argument("overrides", nargs="*", metavar="key=value", help="config overrides")
     demo.set_defaults(handler=_command_demo)
+
+    evaluation = commands.add_parser(
+        "eval",
+        help="score a finished run: ATE, mesh metrics against a GT mesh, report.md",
+        description=(
+            "ATE (all statistics) of RUN_DIR; with --gt-mesh also culling of both meshes "
+            "(--protocol), accuracy, completion, completion ratio, precision/recall/F1 "
+            "and depth L1. Adds to metrics.json, writes mesh_culled.ply, report.md and "
+            "two plots (needs the [eval] and [viz] extras)."
+        ),
+    )
+    evaluation.add_argument("run_dir", metavar="RUN_DIR", help="a finished run folder")
+    evaluation.add_argument("--gt-mesh", help="ground-truth mesh in the poses' world frame")
+    evaluation.add_argument(
+        "--protocol", choices=("eslam", "nice"), default="eslam", help="culling (default eslam)"
+    )
+    evaluation.add_argument(
+        "--samples", type=int, default=450_000, help="samples per mesh (default 450000)"
+    )
+    evaluation.add_argument("--exact", action="store_true", help="point-to-surface distances")
+    evaluation.add_argument(
+        "--views", type=int, default=1000, help="depth-L1 virtual views; 0 = skip (1000)"
+    )
+    evaluation.add_argument("--seed", type=int, default=0, help="samples and views (0)")
+    evaluation.add_argument(
+        "--cull-every", type=int, default=1, help="cull with every k-th frame (1)"
+    )
+    evaluation.add_argument(
+        "--max-unobserved",
+        type=float,
+        default=0.0,
+        help="share of a view's pixels that may see unobserved space (0, the release)",
+    )
+    evaluation.add_argument("--device", default="cpu", help="device for culling (cpu)")
+    evaluation.set_defaults(handler=_command_eval)
     _add_evaluation_commands(commands)
     return parser
 

@@ -73,7 +73,7 @@ class DepthL1Options:
         unobserved_tolerance_m: how far behind the uncut GT surface the culled GT may
             be before a pixel counts as seeing unobserved space, metres.
         max_unobserved_pixels: a view with more such pixels is redrawn (the release:
-            none).
+            none); the pixels of a kept view that see unobserved space are not scored.
         max_draws: cameras drawn at most, in total (default 20 per view).
     """
 
@@ -185,13 +185,24 @@ def draw_camera(box: CameraBox, rng: np.random.Generator) -> np.ndarray:
             return pose
 
 
-def view_error(gt_depth: np.ndarray, rec_depth: np.ndarray, count_missing: bool) -> float | None:
+def view_error(
+    gt_depth: np.ndarray,
+    rec_depth: np.ndarray,
+    count_missing: bool,
+    scored: np.ndarray | None = None,
+) -> float | None:
     """Mean absolute depth difference of one view, metres (None: no pixel to score).
 
     Args:
         gt_depth, rec_depth: (H, W) depth, 0 where no surface.
         count_missing: average over all pixels, a miss counting as depth 0.
+        scored: (H, W) bool, the pixels that may be scored (None = all): pixels that
+            see unobserved space are left out.
     """
+    if scored is not None:
+        gt_depth, rec_depth = gt_depth[scored], rec_depth[scored]
+        if gt_depth.size == 0:
+            return None
     if count_missing:
         return float(np.abs(gt_depth - rec_depth).mean())
     both = (gt_depth > 0) & (rec_depth > 0)
@@ -200,8 +211,10 @@ def view_error(gt_depth: np.ndarray, rec_depth: np.ndarray, count_missing: bool)
     return float(np.abs(gt_depth[both] - rec_depth[both]).mean())
 
 
-def unobserved_pixels(gt_depth: np.ndarray, full_depth: np.ndarray, tolerance_m: float) -> int:
-    """Pixels whose first surface in the uncut GT was culled away from the GT.
+def unobserved_pixels(
+    gt_depth: np.ndarray, full_depth: np.ndarray, tolerance_m: float
+) -> np.ndarray:
+    """(H, W) bool: pixels whose first surface in the uncut GT was culled away from the GT.
 
     Args:
         gt_depth: (H, W) depth of the culled GT mesh, 0 where no surface.
@@ -210,7 +223,7 @@ def unobserved_pixels(gt_depth: np.ndarray, full_depth: np.ndarray, tolerance_m:
     """
     seen_full = full_depth > 0
     culled = (gt_depth <= 0) | (gt_depth > full_depth + tolerance_m)
-    return int(np.count_nonzero(seen_full & culled))
+    return seen_full & culled
 
 
 def depth_l1(
@@ -247,14 +260,16 @@ def depth_l1(
     while len(errors) < options.views and len(errors) + rejected < max_draws:
         pose = draw_camera(box, rng)
         gt_depth = gt_caster.depth(pose, intrinsics, rays)
+        scored = None
         if full_caster is not None:
             full_depth = full_caster.depth(pose, intrinsics, rays)
-            count = unobserved_pixels(gt_depth, full_depth, options.unobserved_tolerance_m)
-            if count > options.max_unobserved_pixels:
+            unobserved = unobserved_pixels(gt_depth, full_depth, options.unobserved_tolerance_m)
+            if np.count_nonzero(unobserved) > options.max_unobserved_pixels:
                 rejected += 1
                 continue
+            scored = ~unobserved
         error = view_error(
-            gt_depth, rec_caster.depth(pose, intrinsics, rays), options.count_missing
+            gt_depth, rec_caster.depth(pose, intrinsics, rays), options.count_missing, scored
         )
         if error is None:
             rejected += 1

@@ -14,9 +14,9 @@ from eslam.data.synthetic_scene import render_frame
 from eslam.data.tum import TUM_CAMERAS, write_tum_sequence
 from eslam.geometry.pose import pose_distance
 from eslam.io.trajectory import read_tum_trajectory
-from eslam.slam.demo import DEMO_CONFIG
 from eslam.slam.loop import run_slam
 from eslam.types import Frame
+from eslam.workflows.demo import DEMO_CONFIG
 
 FRAMES = 6
 # As tests/slam/test_loop.py (coarse planes, few rays and iterations for a 2-core CI),

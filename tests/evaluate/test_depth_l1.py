@@ -95,8 +95,8 @@ def test_view_error_rules() -> None:
 def test_unobserved_pixels() -> None:
     full = np.array([[1.0, 1.0, 2.0, 0.0]])
     culled = np.array([[1.0, 0.0, 3.0, 0.0]])  # kept, culled to nothing, culled to farther
-    assert unobserved_pixels(culled, full, tolerance_m=1e-3) == 2
-    assert unobserved_pixels(full, full, tolerance_m=1e-3) == 0
+    assert unobserved_pixels(culled, full, tolerance_m=1e-3).sum() == 2
+    assert unobserved_pixels(full, full, tolerance_m=1e-3).sum() == 0
 
 
 def test_depth_l1_of_a_mesh_against_itself_is_zero() -> None:
@@ -159,3 +159,12 @@ def test_options_are_checked_and_release_defaults() -> None:
     assert (options.intrinsics().cx, options.intrinsics().cy) == (249.5, 249.5)
     with pytest.raises(ValueError):
         DepthL1Options(views=0)
+
+
+def test_view_error_leaves_out_pixels_that_see_unobserved_space() -> None:
+    gt = np.full((2, 2), 2.0)
+    rec = np.array([[2.0, 2.0], [2.0, 3.0]])  # off by 1 m where the GT was culled away
+    unobserved = np.array([[False, False], [False, True]])
+    assert view_error(gt, rec, count_missing=False) == 0.25
+    assert view_error(gt, rec, count_missing=False, scored=~unobserved) == 0.0
+    assert view_error(gt, rec, count_missing=False, scored=np.zeros((2, 2), bool)) is None

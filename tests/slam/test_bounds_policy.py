@@ -15,8 +15,8 @@ from eslam.errors import InputError
 from eslam.geometry.bounds import depth_points, fraction_outside
 from eslam.io.checkpoint import load_checkpoint
 from eslam.slam.bounds_policy import initial_bound
-from eslam.slam.demo import DEMO_CONFIG
 from eslam.slam.loop import run_slam
+from eslam.workflows.demo import DEMO_CONFIG
 
 FRAMES = 12
 # As tests/slam/test_loop.py: tiny images, few rays and iterations (CI on 2 cores).

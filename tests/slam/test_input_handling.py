@@ -22,8 +22,8 @@ from eslam.data.synthetic import (
     write_synthetic_sequence,
 )
 from eslam.io.trajectory import read_tum_trajectory
-from eslam.slam.demo import DEMO_CONFIG
 from eslam.slam.loop import run_slam
+from eslam.workflows.demo import DEMO_CONFIG
 from tests.slam.test_loop import TINY
 
 SCENE = SynthConfig(frames=9, width=80, height=60, seed=3)

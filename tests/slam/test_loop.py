@@ -12,8 +12,8 @@ from eslam.cli import EXIT_USER_ERROR, main
 from eslam.config import ESLAMConfig, load_config
 from eslam.data.synthetic import SynthConfig, read_synthetic_bound, write_synthetic_sequence
 from eslam.io.trajectory import read_tum_trajectory
-from eslam.slam.demo import DEMO_CONFIG
 from eslam.slam.loop import run_slam
+from eslam.workflows.demo import DEMO_CONFIG
 
 FRAMES = 12
 # Small enough for CI (2 cores): coarser planes, few rays and iterations.

@@ -1,0 +1,89 @@
+"""`eslam eval` on a tiny synthetic run: every metric, culled mesh, report and plots."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from eslam.cli import EXIT_USER_ERROR, main
+from eslam.config import load_config
+from eslam.data.mesh_io import read_mesh_ply
+from eslam.data.synthetic import SynthConfig, read_synthetic_bound, write_synthetic_sequence
+from eslam.slam.loop import run_slam
+from eslam.slam.remesh import remesh_run
+from eslam.workflows.demo import DEMO_CONFIG
+from tests.slam.test_loop import TINY
+
+ALL_KEYS = {
+    "ate_rmse_cm",
+    "ate_mean_cm",
+    "ate_median_cm",
+    "ate_max_cm",
+    "accuracy_cm",
+    "completion_cm",
+    "completion_ratio_pct",
+    "precision_pct",
+    "recall_pct",
+    "f1_pct",
+    "depth_l1_cm",
+}
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
+    root = tmp_path_factory.mktemp("eval")
+    data = root / "data"
+    write_synthetic_sequence(data, SynthConfig(frames=10, width=80, height=60, seed=3))
+    bound = read_synthetic_bound(data)
+    config = load_config(DEMO_CONFIG, [f"data.path={data}", f"scene.bound={bound}", *TINY])
+    result = run_slam(config, root / "run")
+    # TINY meshes at 10 cm for speed; a cell is meshed only where all its corners were
+    # observed (up to T = 6 cm behind the depth), which drops most cells at 10 cm
+    remesh_run(result.run_dir, resolution=0.03)
+    return result.run_dir, data / "mesh.ply"
+
+
+def _eval(run_dir: Path, *extra: str) -> int:
+    return main(["eval", str(run_dir), "--samples", "50000", "--views", "15", *extra])
+
+
+def test_eval_writes_every_metric_report_and_plots(run, capsys) -> None:
+    run_dir, gt_mesh = run
+    assert _eval(run_dir, "--gt-mesh", str(gt_mesh), "--max-unobserved", "0.5") == 0
+    metrics = json.loads((run_dir / "metrics.json").read_text())
+    assert ALL_KEYS <= set(metrics)
+    assert metrics["frames"] == 10  # the run's own metrics are kept
+    # a coarse 10-frame map (12 cm planes) measured 0.95 / 2.4 cm, 88 %, F1 59 %,
+    # depth L1 4.0 cm (15 views): a broken cull, frame or sampling would be far off
+    assert metrics["accuracy_cm"] < 2.0 and metrics["completion_cm"] < 4.0
+    assert metrics["completion_ratio_pct"] > 80.0 and metrics["f1_pct"] > 40.0
+    assert metrics["depth_l1_cm"] < 6.0
+    assert metrics["ate_max_cm"] >= metrics["ate_rmse_cm"] >= metrics["ate_median_cm"] * 0.5
+    culled, full = read_mesh_ply(run_dir / "mesh_culled.ply"), read_mesh_ply(run_dir / "mesh.ply")
+    assert 0 < len(culled.faces) <= len(full.faces)
+    report = (run_dir / "report.md").read_text()
+    assert "| Accuracy (cm) |" in report and "450,000" not in report and "50,000" in report
+    for image in ("trajectory.png", "translation_error.png"):
+        assert (run_dir / image).is_file() and f"]({image})" in report
+    assert "Depth L1" in capsys.readouterr().out
+
+
+def test_reevaluation_drops_stale_metrics_and_nice_culls_less(run) -> None:
+    run_dir, gt_mesh = run
+    assert _eval(run_dir, "--gt-mesh", str(gt_mesh), "--views", "0") == 0
+    metrics = json.loads((run_dir / "metrics.json").read_text())
+    assert "depth_l1_cm" not in metrics and "accuracy_cm" in metrics
+    eslam_faces = len(read_mesh_ply(run_dir / "mesh_culled.ply").faces)
+    assert _eval(run_dir, "--gt-mesh", str(gt_mesh), "--views", "0", "--protocol", "nice") == 0
+    assert len(read_mesh_ply(run_dir / "mesh_culled.ply").faces) >= eslam_faces
+    assert _eval(run_dir) == 0  # ATE only
+    metrics = json.loads((run_dir / "metrics.json").read_text())
+    assert "ate_rmse_cm" in metrics and "accuracy_cm" not in metrics
+
+
+def test_eval_of_a_folder_that_is_not_a_run(tmp_path: Path, capsys) -> None:
+    assert main(["eval", str(tmp_path)]) == EXIT_USER_ERROR
+    err = capsys.readouterr().err.strip()
+    assert "config.yaml: not found: not a finished run folder" in err and "\n" not in err
