@@ -35,10 +35,10 @@ from eslam.config import load_config
 from eslam.data.synthetic import read_synthetic_bound, write_synthetic_sequence
 from eslam.mesh.cull import CullCameras, CullOptions, visible_vertices
 from eslam.mesh.extract import extract_mesh
-from eslam.slam.demo import DEMO_CONFIG, DEMO_SCENE
 from eslam.slam.loop import run_slam
 from eslam.slam.state import SLAMState, load_state
 from eslam.types import Intrinsics
+from eslam.workflows.demo import DEMO_CONFIG, DEMO_SCENE
 
 RESOLUTIONS = (0.01, 0.02)
 """Grid steps timed, metres: the release meshes Replica/TUM at 1 cm, ScanNet at 2 cm."""
@@ -155,7 +155,7 @@ def main(argv: list[str] | None = None) -> None:
     facts = {
         "command": command,
         "workload": workload,
-        "bound": state.field.bound.cpu().tolist(),
+        "bound": [[round(v, 3) for v in row] for row in state.field.bound.cpu().tolist()],
         "keyframes": len(state.keyframes),
         "load": (load_start, load_average()),
     }
