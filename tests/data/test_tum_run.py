@@ -17,27 +17,12 @@ from eslam.io.trajectory import read_tum_trajectory
 from eslam.slam.loop import run_slam
 from eslam.types import Frame
 from eslam.workflows.demo import DEMO_CONFIG
+from tests.slam.test_loop import TINY as LOOP_TINY
 
 FRAMES = 6
-# As tests/slam/test_loop.py (coarse planes, few rays and iterations for a 2-core CI),
-# but 30 tracking iterations: with 8 the estimate lags the true motion by half.
-TINY = [
-    "tracking.rays=200",
-    "tracking.border=4",
-    "tracking.iterations=30",
-    "mapping.rays=400",
-    "mapping.every=3",
-    "mapping.window=4",
-    "mapping.iterations=6",
-    "mapping.first_iterations=60",
-    "render.samples_stratified=12",
-    "render.samples_surface=6",
-    "output.progress=false",
-    "output.checkpoint_every=4",
-    "output.mesh_resolution=0.1",
-    "field.geometry_resolution=[0.24, 0.12]",
-    "field.appearance_resolution=[0.24, 0.12]",
-]
+# tests/slam/test_loop.py's tiny settings; 30 tracking steps follow the true motion
+# (with 8 the estimate lags it by about half)
+TINY = [*LOOP_TINY, "tracking.iterations=30"]
 
 
 def _bound_in_first_camera(corners_bound: list[list[float]], first: np.ndarray) -> list:

@@ -17,26 +17,11 @@ from eslam.io.checkpoint import load_checkpoint
 from eslam.slam.bounds_policy import initial_bound
 from eslam.slam.loop import run_slam
 from eslam.workflows.demo import DEMO_CONFIG
+from tests.slam.test_loop import TINY as LOOP_TINY
 
 FRAMES = 12
-# As tests/slam/test_loop.py: tiny images, few rays and iterations (CI on 2 cores).
-TINY = [
-    "tracking.rays=200",
-    "tracking.border=4",
-    "tracking.iterations=8",
-    "mapping.rays=400",
-    "mapping.every=3",
-    "mapping.window=4",
-    "mapping.iterations=6",
-    "mapping.first_iterations=60",
-    "render.samples_stratified=12",
-    "render.samples_surface=6",
-    "output.progress=false",
-    "output.checkpoint_every=4",
-    "output.mesh=false",
-    "field.geometry_resolution=[0.24, 0.12]",
-    "field.appearance_resolution=[0.24, 0.12]",
-]
+# tests/slam/test_loop.py's tiny settings, without the mesh (bounds are what is tested)
+TINY = [*LOOP_TINY, "output.mesh=false"]
 TOO_SMALL = "scene.bound=[[0.5, 1.0], [0.5, 1.0], [0.5, 1.0]]"
 """A hand-set bound that misses every point of the synthetic room's first frames."""
 
