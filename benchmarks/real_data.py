@@ -32,7 +32,7 @@ from pathlib import Path
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _machine import append_section, load_average, machine_lines
+from _machine import append_section, command_line, load_average, machine_lines
 
 from eslam.config import load_config
 from eslam.slam.loop import RunResult, run_slam
@@ -146,7 +146,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
 def main(argv: list[str] | None = None) -> None:
     args = parse_args(argv)
     device = torch.device(args.device)
-    command = "python benchmarks/real_data.py " + " ".join(argv if argv else sys.argv[1:])
+    command = command_line("benchmarks/real_data.py", argv)
     load_start = load_average()
     rows = []
     for case in CASES:
