@@ -67,6 +67,14 @@ def append_section(path: Path, section: str) -> None:
     write_text(path, text.rstrip("\n") + "\n\n" + section)
 
 
+def publish(section: str, docs: Path, print_only: bool) -> None:
+    """Print ``section`` and, unless ``print_only``, append it to ``docs``."""
+    print(section, end="")
+    if not print_only:
+        append_section(docs, section)
+        print(f"appended to {docs}")
+
+
 def command_line(script: str, argv: list[str] | None) -> str:
     """The command that ran ``script`` (e.g. benchmarks/bench_core.py), path relative to
     the repo root; ``argv`` given = called from Python with those arguments."""

@@ -35,7 +35,7 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from _machine import DEFAULT_DOCS, append_section, command_line, load_average, machine_lines
+from _machine import DEFAULT_DOCS, command_line, load_average, machine_lines, publish
 
 from eslam.config import ESLAMConfig
 from eslam.field.scene_field import SceneField
@@ -355,10 +355,7 @@ def main(argv: list[str] | None = None) -> None:
     load_start = load_average()
     results, facts = run(device, args.warmup, args.repeats)
     section = report(results, facts, device, args, command, (load_start, load_average()))
-    print(section, end="")
-    if not args.no_append:
-        append_section(args.docs, section)
-        print(f"appended to {args.docs}")
+    publish(section, args.docs, args.no_append)
 
 
 if __name__ == "__main__":

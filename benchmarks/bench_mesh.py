@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from _machine import DEFAULT_DOCS, append_section, command_line, load_average, machine_lines
+from _machine import DEFAULT_DOCS, command_line, load_average, machine_lines, publish
 
 from eslam.config import load_config
 from eslam.data.synthetic import read_synthetic_bound, write_synthetic_sequence
@@ -160,10 +160,7 @@ def main(argv: list[str] | None = None) -> None:
         "load": (load_start, load_average()),
     }
     section = report(rows, cull_s, args, facts)
-    print(section, end="")
-    if not args.no_append:
-        append_section(args.docs, section)
-        print(f"appended to {args.docs}")
+    publish(section, args.docs, args.no_append)
 
 
 if __name__ == "__main__":

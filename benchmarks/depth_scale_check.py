@@ -26,7 +26,7 @@ import numpy as np
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _machine import DEFAULT_DOCS, append_section, command_line
+from _machine import DEFAULT_DOCS, command_line, publish
 
 from eslam.config import load_config
 from eslam.data import open_sequence
@@ -132,10 +132,7 @@ def main(argv: list[str] | None = None) -> None:
             "",
         ]
     )
-    print(section, end="")
-    if not args.no_append:
-        append_section(args.docs, section)
-        print(f"appended to {args.docs}")
+    publish(section, args.docs, args.no_append)
 
 
 if __name__ == "__main__":

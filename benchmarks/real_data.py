@@ -32,14 +32,12 @@ from pathlib import Path
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _machine import append_section, command_line, load_average, machine_lines
+from _machine import DEFAULT_DOCS, REPO, command_line, load_average, machine_lines, publish
 
 from eslam.config import load_config
 from eslam.slam.loop import RunResult, run_slam
 
-REPO = Path(__file__).resolve().parents[1]
 CONFIGS = REPO / "eslam" / "configs"
-DEFAULT_DOCS = REPO / "docs" / "benchmarks.md"
 
 
 @dataclass(frozen=True)
@@ -166,10 +164,7 @@ def main(argv: list[str] | None = None) -> None:
     if args.note:
         lines.append(f"- note: {args.note}")
     section = "\n".join([*lines, "", table(rows)])
-    print(section, end="")
-    if not args.no_append:
-        append_section(args.docs, section)
-        print(f"appended to {args.docs}")
+    publish(section, args.docs, args.no_append)
 
 
 if __name__ == "__main__":
