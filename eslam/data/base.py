@@ -269,3 +269,45 @@ class FrameReading:
             pose_gt=np.array(pose, dtype=np.float64) if usable else None,
             timestamp=float(timestamp),
         )
+
+
+class FileSequence:
+    """Base of the readers whose frames are (colour, depth) image files on disk.
+
+    A subclass's ``__init__`` finds the files and sets :attr:`reading` and the four
+    per-frame lists below (all in frame order, one entry per frame); this class then
+    implements :class:`RGBDSequence` on them, so every reader indexes, reads and
+    reports poses and time stamps the same way.
+
+    Attributes:
+        reading: how one file pair becomes a checked, transformed :class:`Frame`.
+        _colour_paths, _depth_paths: the frames' image files.
+        _poses: (N, 4, 4) float64 camera-to-world ground truth (a NaN matrix for a
+            frame without one), or None when the sequence has none.
+        _times: (N,) float64 time stamps in seconds, or frame numbers where the
+            dataset has no time stamps.
+    """
+
+    reading: FrameReading
+    _colour_paths: list[Path]
+    _depth_paths: list[Path]
+    _poses: np.ndarray | None
+    _times: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self._colour_paths)
+
+    def __getitem__(self, index: int) -> Frame:
+        if not 0 <= index < len(self):
+            raise IndexError(f"frame {index} out of range for {len(self)} frames")
+        files = (self._colour_paths[index], self._depth_paths[index])
+        pose = None if self._poses is None else self._poses[index]
+        return self.reading.read(index, files, pose, self._times[index])
+
+    def gt_poses(self) -> np.ndarray | None:
+        """(N, 4, 4) float64 camera-to-world poses (NaN where a frame has none), or None."""
+        return None if self._poses is None else self._poses.copy()
+
+    def timestamps(self) -> np.ndarray:
+        """(N,) float64 seconds, or the frame numbers where the dataset has no time stamps."""
+        return self._times.copy()

@@ -44,6 +44,7 @@ from PIL import Image
 from eslam.atomic import write_text, write_with
 from eslam.config import DataConfig
 from eslam.data.base import (
+    FileSequence,
     FrameReading,
     check_pose,
     require_dir,
@@ -211,7 +212,7 @@ def read_folder_poses(path: Path, timestamps: np.ndarray, numeric_stems: bool) -
     return poses
 
 
-class FolderSequence:
+class FolderSequence(FileSequence):
     """Reader of a plain colour/depth folder (see the module docstring).
 
     Args:
@@ -249,33 +250,15 @@ class FolderSequence:
                     "colour and depth images are paired by file name",
                 )
         self.numeric_stems = all(_NUMBER_RE.match(stem) for stem in colour)
-        self.stems, self._timestamps = _order(colour)
+        self.stems, self._times = _order(colour)
         self._colour_paths = [colour[s] for s in self.stems]
         self._depth_paths = [depth[s] for s in self.stems]
         poses_path = self.root / POSES_FILE
         self._poses = (
-            read_folder_poses(poses_path, self._timestamps, self.numeric_stems)
+            read_folder_poses(poses_path, self._times, self.numeric_stems)
             if poses_path.exists()
             else None
         )
-
-    def __len__(self) -> int:
-        return len(self.stems)
-
-    def __getitem__(self, index: int) -> Frame:
-        if not 0 <= index < len(self):
-            raise IndexError(f"frame {index} out of range for {len(self)} frames")
-        files = (self._colour_paths[index], self._depth_paths[index])
-        pose = None if self._poses is None else self._poses[index]
-        return self.reading.read(index, files, pose, self._timestamps[index])
-
-    def gt_poses(self) -> np.ndarray | None:
-        """(N, 4, 4) float64 camera-to-world poses (NaN where a frame has none), or None."""
-        return None if self._poses is None else self._poses.copy()
-
-    def timestamps(self) -> np.ndarray:
-        """(N,) the numeric file stems, or the positions 0..N-1 when stems are not numbers."""
-        return self._timestamps.copy()
 
 
 def write_folder_sequence(

@@ -26,6 +26,7 @@ from PIL import Image
 from eslam.atomic import write_text, write_with
 from eslam.config import DataConfig
 from eslam.data.base import (
+    FileSequence,
     FrameReading,
     check_pose,
     require_dir,
@@ -100,7 +101,7 @@ def _numbered_files(folder: Path, pattern: re.Pattern[str]) -> dict[int, Path]:
     return files
 
 
-class ReplicaSequence:
+class ReplicaSequence(FileSequence):
     """Reader of a Replica-layout folder (see the module docstring).
 
     Args:
@@ -140,6 +141,7 @@ class ReplicaSequence:
                 "every frame needs both a colour and a depth image",
             )
         self.numbers = sorted(colour)
+        self._times = np.array(self.numbers, dtype=np.float64)
         self._colour_paths = [colour[n] for n in self.numbers]
         self._depth_paths = [depth[n] for n in self.numbers]
         traj_path = self.root / "traj.txt"
@@ -152,23 +154,6 @@ class ReplicaSequence:
                 "traj.txt needs one line per frame",
             )
         self._poses = all_poses[self.numbers]
-
-    def __len__(self) -> int:
-        return len(self.numbers)
-
-    def __getitem__(self, index: int) -> Frame:
-        if not 0 <= index < len(self):
-            raise IndexError(f"frame {index} out of range for {len(self)} frames")
-        files = (self._colour_paths[index], self._depth_paths[index])
-        return self.reading.read(index, files, self._poses[index], self.numbers[index])
-
-    def gt_poses(self) -> np.ndarray:
-        """(N, 4, 4) float64 camera-to-world poses of the frames present."""
-        return self._poses.copy()
-
-    def timestamps(self) -> np.ndarray:
-        """(N,) the frame numbers (Replica has no time stamps)."""
-        return np.array(self.numbers, dtype=np.float64)
 
 
 def write_replica_sequence(

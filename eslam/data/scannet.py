@@ -34,6 +34,7 @@ from PIL import Image, UnidentifiedImageError
 from eslam.atomic import write_text, write_with
 from eslam.config import DataConfig
 from eslam.data.base import (
+    FileSequence,
     FrameReading,
     check_pose,
     require_dir,
@@ -152,7 +153,7 @@ def read_scannet_pose(path: Path) -> np.ndarray:
     return check_pose(pose, path, "pose")
 
 
-class ScanNetSequence:
+class ScanNetSequence(FileSequence):
     """Reader of a ScanNet scene exported by SensReader (see the module docstring).
 
     Args:
@@ -186,6 +187,7 @@ class ScanNetSequence:
         _check_partners(depth, colour, folders["color"])
         _check_partners(colour, poses, folders["pose"])
         self.numbers = sorted(colour)
+        self._times = np.array(self.numbers, dtype=np.float64)
         self._colour_paths = [colour[n] for n in self.numbers]
         self._depth_paths = [depth[n] for n in self.numbers]
         self.depth_scale = options.depth_scale or SCANNET_DEPTH_SCALE
@@ -200,23 +202,6 @@ class ScanNetSequence:
         )
         self.intrinsics = self.reading.intrinsics
         self._poses = np.stack([read_scannet_pose(poses[n]) for n in self.numbers])
-
-    def __len__(self) -> int:
-        return len(self.numbers)
-
-    def __getitem__(self, index: int) -> Frame:
-        if not 0 <= index < len(self):
-            raise IndexError(f"frame {index} out of range for {len(self)} frames")
-        files = (self._colour_paths[index], self._depth_paths[index])
-        return self.reading.read(index, files, self._poses[index], self.numbers[index])
-
-    def gt_poses(self) -> np.ndarray:
-        """(N, 4, 4) float64 camera-to-world poses; NaN matrices where tracking was lost."""
-        return self._poses.copy()
-
-    def timestamps(self) -> np.ndarray:
-        """(N,) the frame numbers (the export has no time stamps)."""
-        return np.array(self.numbers, dtype=np.float64)
 
 
 def _matrix_text(matrix: np.ndarray) -> str:

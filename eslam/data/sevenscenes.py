@@ -39,6 +39,7 @@ from PIL import Image
 from eslam.atomic import write_text, write_with
 from eslam.config import DataConfig
 from eslam.data.base import (
+    FileSequence,
     FrameReading,
     check_pose,
     require_dir,
@@ -150,7 +151,7 @@ def _refuse_scene_folder(root: Path) -> None:
     raise InputError(root, "holds no frame-XXXXXX.color.png / .depth.png / .pose.txt files")
 
 
-class SevenScenesSequence:
+class SevenScenesSequence(FileSequence):
     """Reader of one 7-Scenes recording (see the module docstring).
 
     Args:
@@ -179,6 +180,7 @@ class SevenScenesSequence:
                     "every frame needs a colour, a depth and a pose file",
                 )
         self.numbers = sorted(files["color"])
+        self._times = np.array(self.numbers, dtype=np.float64)
         self._colour_paths = [files["color"][n] for n in self.numbers]
         self._depth_paths = [files["depth"][n] for n in self.numbers]
         self.raw_intrinsics = find_intrinsics(self.root, image_size(self._depth_paths[0]))
@@ -192,23 +194,6 @@ class SevenScenesSequence:
         )
         self.intrinsics = self.reading.intrinsics
         self._poses = np.stack([read_sevenscenes_pose(files["pose"][n]) for n in self.numbers])
-
-    def __len__(self) -> int:
-        return len(self.numbers)
-
-    def __getitem__(self, index: int) -> Frame:
-        if not 0 <= index < len(self):
-            raise IndexError(f"frame {index} out of range for {len(self)} frames")
-        files = (self._colour_paths[index], self._depth_paths[index])
-        return self.reading.read(index, files, self._poses[index], self.numbers[index])
-
-    def gt_poses(self) -> np.ndarray:
-        """(N, 4, 4) float64 camera-to-world poses, rotations re-orthonormalised."""
-        return self._poses.copy()
-
-    def timestamps(self) -> np.ndarray:
-        """(N,) the frame numbers (7-Scenes has no time stamps; it records at 30 Hz)."""
-        return np.array(self.numbers, dtype=np.float64)
 
 
 def write_sevenscenes_sequence(

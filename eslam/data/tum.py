@@ -42,6 +42,7 @@ from PIL import Image
 from eslam.atomic import write_text, write_with
 from eslam.config import DataConfig
 from eslam.data.base import (
+    FileSequence,
     FrameReading,
     check_pose,
     require_dir,
@@ -321,7 +322,7 @@ def _require_images(paths: Sequence[Path], listed_in: Path, partner: str) -> Non
             )
 
 
-class TUMSequence:
+class TUMSequence(FileSequence):
     """Reader of a TUM RGB-D folder (see the module docstring).
 
     Args:
@@ -391,24 +392,6 @@ class TUMSequence:
             poses = groundtruth.poses[pairs.pose]
             self.mocap_from_world = poses[0].copy()
             self._poses = _relative_to(poses[0], poses)
-
-    def __len__(self) -> int:
-        return len(self._times)
-
-    def __getitem__(self, index: int) -> Frame:
-        if not 0 <= index < len(self):
-            raise IndexError(f"frame {index} out of range for {len(self)} frames")
-        files = (self._colour_paths[index], self._depth_paths[index])
-        pose = None if self._poses is None else self._poses[index]
-        return self.reading.read(index, files, pose, self._times[index])
-
-    def gt_poses(self) -> np.ndarray | None:
-        """(N, 4, 4) camera-to-world poses relative to frame 0, or None without groundtruth.txt."""
-        return None if self._poses is None else self._poses.copy()
-
-    def timestamps(self) -> np.ndarray:
-        """(N,) float64 colour-image timestamps, seconds (as in rgb.txt)."""
-        return self._times.copy()
 
 
 def _relative_to(reference: np.ndarray, poses: np.ndarray) -> np.ndarray:
