@@ -3,6 +3,7 @@ appending a section to docs/benchmarks.md."""
 
 from __future__ import annotations
 
+import argparse
 import os
 import platform
 import shlex
@@ -12,6 +13,8 @@ from pathlib import Path
 import torch
 
 from eslam.atomic import write_text
+from eslam.config.device import resolve_device
+from eslam.errors import ConfigError
 
 REPO = Path(__file__).resolve().parents[1]
 DEFAULT_DOCS = REPO / "docs" / "benchmarks.md"
@@ -65,6 +68,21 @@ def append_section(path: Path, section: str) -> None:
     """Append ``section`` to the markdown file at ``path`` (created with the intro)."""
     text = path.read_text(encoding="utf-8") if path.exists() else INTRO
     write_text(path, text.rstrip("\n") + "\n\n" + section)
+
+
+def add_device_argument(parser: argparse.ArgumentParser) -> None:
+    """``--device``: any name the config's ``device`` takes; default auto."""
+    parser.add_argument(
+        "--device", default="auto", help="auto (CUDA, else MPS, else CPU), cpu, cuda:N, mps"
+    )
+
+
+def check_device(parser: argparse.ArgumentParser, args: argparse.Namespace) -> None:
+    """Resolve ``args.device`` in place (auto -> a concrete name), or stop with a usage error."""
+    try:
+        args.device = str(resolve_device(args.device))
+    except ConfigError as error:
+        parser.error(f"--device: {error}")
 
 
 def publish(section: str, docs: Path, print_only: bool) -> None:

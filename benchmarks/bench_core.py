@@ -35,7 +35,15 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from _machine import DEFAULT_DOCS, command_line, load_average, machine_lines, publish
+from _machine import (
+    DEFAULT_DOCS,
+    add_device_argument,
+    check_device,
+    command_line,
+    load_average,
+    machine_lines,
+    publish,
+)
 
 from eslam.config import ESLAMConfig
 from eslam.field.scene_field import SceneField
@@ -323,9 +331,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         description="ms per tracking / mapping iteration at the paper's Replica settings, "
         "reference vs fast plane sampling."
     )
-    parser.add_argument(
-        "--device", choices=("cpu", "cuda"), default=None, help="default: cuda when available"
-    )
+    add_device_argument(parser)
     parser.add_argument("--repeats", type=int, default=20, help="timed iterations (default 20)")
     parser.add_argument("--warmup", type=int, default=3, help="untimed iterations (default 3)")
     parser.add_argument(
@@ -339,10 +345,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     args = parser.parse_args(argv)
     if args.repeats < 1 or args.warmup < 0 or args.threads < 0:
         parser.error("--repeats must be >= 1, --warmup and --threads >= 0")
-    if args.device is None:
-        args.device = "cuda" if torch.cuda.is_available() else "cpu"
-    if args.device == "cuda" and not torch.cuda.is_available():
-        parser.error("--device cuda: torch sees no CUDA device")
+    check_device(parser, args)
     return args
 
 

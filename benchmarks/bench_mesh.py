@@ -29,7 +29,15 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from _machine import DEFAULT_DOCS, command_line, load_average, machine_lines, publish
+from _machine import (
+    DEFAULT_DOCS,
+    add_device_argument,
+    check_device,
+    command_line,
+    load_average,
+    machine_lines,
+    publish,
+)
 
 from eslam.config import load_config
 from eslam.data.synthetic import read_synthetic_bound, write_synthetic_sequence
@@ -119,7 +127,7 @@ def report(rows: dict, cull_s: float, args: argparse.Namespace, facts: dict) -> 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description="seconds to mesh a learned field and to cull")
-    parser.add_argument("--device", choices=("cpu", "cuda"), default="cpu")
+    add_device_argument(parser)
     parser.add_argument("--frames", type=int, default=20, help="frames of the demo run")
     parser.add_argument("--run-dir", type=Path, help="time this run folder instead")
     parser.add_argument("--cull-vertices", type=int, default=1_000_000)
@@ -129,8 +137,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--docs", type=Path, default=DEFAULT_DOCS)
     parser.add_argument("--note", default="", help="a remark printed with the machine")
     args = parser.parse_args(argv)
-    if args.device == "cuda" and not torch.cuda.is_available():
-        parser.error("--device cuda: torch sees no CUDA device")
+    check_device(parser, args)
     return args
 
 

@@ -32,7 +32,16 @@ from pathlib import Path
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _machine import DEFAULT_DOCS, REPO, command_line, load_average, machine_lines, publish
+from _machine import (
+    DEFAULT_DOCS,
+    REPO,
+    add_device_argument,
+    check_device,
+    command_line,
+    load_average,
+    machine_lines,
+    publish,
+)
 
 from eslam.config import load_config
 from eslam.slam.loop import RunResult, run_slam
@@ -126,7 +135,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     default_root = os.environ.get("ESLAM_TEST_DATA", str(REPO.parent / "shared" / "data"))
     parser.add_argument("--data-root", type=Path, default=Path(default_root))
-    parser.add_argument("--device", default="cuda" if torch.cuda.is_available() else "cpu")
+    add_device_argument(parser)
     parser.add_argument("--threads", type=int, default=2, help="torch CPU threads")
     parser.add_argument("--out", type=Path, default=Path("runs/real_data"))
     parser.add_argument(
@@ -138,7 +147,9 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--docs", type=Path, default=DEFAULT_DOCS)
     parser.add_argument("--no-append", action="store_true")
     parser.add_argument("--note", default="")
-    return parser.parse_args(argv)
+    args = parser.parse_args(argv)
+    check_device(parser, args)
+    return args
 
 
 def main(argv: list[str] | None = None) -> None:

@@ -383,7 +383,7 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("overrides", nargs="*", metavar="key=value", help="config overrides")
     run.add_argument("--data", help="sequence folder (sets data.path)")
     run.add_argument("--out", help="run folder (default runs/NAME-TIME)")
-    run.add_argument("--device", help="cpu, cuda or cuda:N (sets device)")
+    run.add_argument("--device", help="auto, cpu, cuda, cuda:N or mps (sets device)")
     run.add_argument("--start", type=int, help="first frame to use (sets data.start)")
     run.add_argument("--stride", type=int, help="use every N-th frame (sets data.stride)")
     run.add_argument("--max-frames", type=int, help="use at most N frames (sets data.max_frames)")
@@ -413,7 +413,9 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="M",
         help="grid step in metres (default: the run's output.mesh_resolution)",
     )
-    mesh.add_argument("--device", default="cpu", help="cpu, cuda or cuda:N (default cpu)")
+    mesh.add_argument(
+        "--device", default="cpu", help="auto, cpu, cuda, cuda:N or mps (default cpu)"
+    )
     mesh.set_defaults(handler=_command_mesh)
 
     demo = commands.add_parser(
@@ -460,7 +462,9 @@ def build_parser() -> argparse.ArgumentParser:
         default=0.0,
         help="share of a view's pixels that may see unobserved space (0, the release)",
     )
-    evaluation.add_argument("--device", default="cpu", help="device for culling (cpu)")
+    evaluation.add_argument(
+        "--device", default="cpu", help="device for culling: auto, cpu, cuda, cuda:N or mps (cpu)"
+    )
     evaluation.set_defaults(handler=_command_eval)
     _add_evaluation_commands(commands)
     return parser

@@ -275,7 +275,7 @@ class ESLAMConfig:
     seed: int = 0
     """Seed of every random generator; the same seed gives the same numbers on CPU."""
     device: str = "cpu"
-    """Torch device to run on: cpu, cuda, cuda:N or mps."""
+    """Torch device to run on: cpu, cuda, cuda:N, mps, or auto (CUDA, else MPS, else CPU)."""
     threads: int = 2
     """Torch intra-op CPU threads; 0 leaves torch's default."""
     data: DataConfig = dataclasses.field(default_factory=DataConfig)
@@ -300,5 +300,5 @@ class ESLAMConfig:
             raise ValueError(f"seed must be >= 0, got {self.seed}")
         if self.threads < 0:
             raise ValueError(f"threads must be >= 0 (0 = torch's default), got {self.threads}")
-        if not re.fullmatch(r"cpu|mps|cuda(:\d+)?", self.device):
-            raise ValueError(f"device must be cpu, cuda, cuda:N or mps, got '{self.device}'")
+        if not re.fullmatch(r"auto|cpu|mps|cuda(:\d+)?", self.device):
+            raise ValueError(f"device must be auto, cpu, cuda, cuda:N or mps, got '{self.device}'")

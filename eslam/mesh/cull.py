@@ -33,6 +33,7 @@ from typing import Literal
 import numpy as np
 import torch
 
+from eslam.config.device import resolve_device
 from eslam.data.mesh_io import TriangleMesh
 from eslam.errors import ConfigError
 from eslam.mesh.subdivide import subdivide_long_edges
@@ -135,7 +136,7 @@ def visible_vertices(
     """(V,) bool: whether some frame sees each of the (V, 3) vertices under ``protocol``."""
     if protocol not in ("eslam", "nice"):
         raise ConfigError(f"unknown culling protocol '{protocol}' (use 'eslam' or 'nice')")
-    device = torch.device(options.device)
+    device = resolve_device(options.device)
     points = torch.as_tensor(np.asarray(vertices), dtype=torch.float32, device=device)
     seen = torch.zeros(points.shape[0], dtype=torch.bool, device=device)
     remaining = torch.arange(points.shape[0], device=device)

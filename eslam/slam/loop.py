@@ -18,6 +18,7 @@ import numpy as np
 import torch
 
 from eslam.config import ESLAMConfig, save_config
+from eslam.config.device import resolve_device
 from eslam.data import RGBDSequence, open_sequence, sequence_timestamps
 from eslam.errors import ConfigError, InputError
 from eslam.evaluate.trajectory import absolute_trajectory_error
@@ -48,13 +49,6 @@ class RunResult:
     run_dir: Path
     poses: np.ndarray
     metrics: dict
-
-
-def _device(name: str) -> torch.device:
-    device = torch.device(name)
-    if device.type == "cuda" and not torch.cuda.is_available():
-        raise ConfigError(f"device '{name}' asked for, but torch sees no CUDA device (use cpu)")
-    return device
 
 
 def _frame_view(frame, directions: torch.Tensor, device: torch.device, border: int) -> View:
@@ -110,7 +104,7 @@ def run_slam(
         raise ConfigError("data.path is not set (pass --data PATH or set data.path in the config)")
     if config.threads > 0:
         torch.set_num_threads(config.threads)
-    device = _device(config.device)
+    device = resolve_device(config.device)
     sequence = open_sequence(config.data)
     preflight(sequence)
     run = RunDirectory(Path(run_dir)) if resume else prepare_run_directory(run_dir, overwrite)

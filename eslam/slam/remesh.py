@@ -7,9 +7,8 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-import torch
-
 from eslam.config import load_config
+from eslam.config.device import resolve_device
 from eslam.data.mesh_io import TriangleMesh, write_mesh_ply
 from eslam.errors import ConfigError, InputError
 from eslam.io.run_dir import RunDirectory
@@ -37,19 +36,6 @@ class RemeshResult:
     seconds: float
 
 
-def _device(name: str) -> torch.device:
-    try:
-        device = torch.device(name)
-    except RuntimeError:
-        raise ConfigError(f"unknown device '{name}' (use cpu, cuda or cuda:N)") from None
-    if device.type == "cuda" and (device.index or 0) >= torch.cuda.device_count():
-        raise ConfigError(
-            f"device '{name}' asked for, but torch sees {torch.cuda.device_count()} CUDA "
-            "device(s) (use cpu or an existing cuda:N)"
-        )
-    return device
-
-
 def remesh_run(
     run_dir: str | Path, resolution: float | None = None, device: str = "cpu"
 ) -> RemeshResult:
@@ -72,7 +58,7 @@ def remesh_run(
         raise ConfigError(f"--resolution must be > 0 metres, got {resolution}")
     config = load_config(run.config)
     step = config.output.mesh_resolution if resolution is None else float(resolution)
-    target = _device(device)
+    target = resolve_device(device)
     state = load_state(run.map, config, target)
     if len(state.keyframes) == 0:
         raise InputError(run.map, "holds no keyframes, so no space was observed", "run longer")

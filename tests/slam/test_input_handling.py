@@ -104,6 +104,10 @@ def test_bad_input_leaves_an_earlier_run_untouched(
     code = main([*_args(sequence, out), "--overwrite", "tracking.iteration=3"])
     assert code == EXIT_USER_ERROR
     assert "tracking.iterations" in capsys.readouterr().err  # the closest valid key
+    # a device this machine does not have
+    code = main([*_args(sequence, out), "--overwrite", "--device", "cuda:99"])
+    assert code == EXIT_USER_ERROR
+    assert "device 'cuda:99' asked for, but torch sees" in capsys.readouterr().err
     after = {p.name: p.read_bytes() for p in out.iterdir()}
     assert after == before
 
