@@ -172,23 +172,23 @@ def tracking_step(
     translation = translation.clone().requires_grad_(True)
     optimiser = torch.optim.Adam(
         [
-            {"params": [translation], "lr": tracking.lr_translation},
-            {"params": [quaternion], "lr": tracking.lr_rotation},
+            {"params": [translation], "lr": tracking.render.lr_translation},
+            {"params": [quaternion], "lr": tracking.render.lr_rotation},
         ],
-        betas=tracking.adam_betas,
+        betas=tracking.render.adam_betas,
     )
 
     def step() -> float:
         c2w = pose_from_quaternion_translation(quaternion, translation)
-        rays = sample_view_rays(view, c2w, tracking.rays, generator)
+        rays = sample_view_rays(view, c2w, tracking.render.rays, generator)
         output = render_rays(field, rays, config.render, perturb=True, generator=generator)
         terms = compute_losses(
             output,
             rays,
-            tracking.weights,
+            tracking.render.weights,
             field.truncation,
             config.loss,
-            outlier_factor=tracking.outlier_factor,
+            outlier_factor=tracking.render.outlier_factor,
         )
         loss = float(terms.total.detach())  # track_frame reads the loss every iteration
         optimiser.zero_grad(set_to_none=True)
@@ -255,7 +255,7 @@ def run(
     bound = torch.tensor(ROOM0_BOUND)
     poses = random_poses(WINDOW, bound, data).to(device)
     low, high = bound[:, 0], bound[:, 1]
-    points = low + (high - low) * torch.rand(config.tracking.rays * samples, 3, generator=data)
+    points = low + (high - low) * torch.rand(config.tracking.render.rays * samples, 3, generator=data)
     points = points.to(device)
     results: dict[tuple[str, str], Stats] = {}
     facts: dict[str, object] = {"samples": samples, "points": points.shape[0]}
@@ -280,8 +280,8 @@ def run(
 def markdown_table(results: dict[tuple[str, str], Stats], config: ESLAMConfig) -> str:
     samples = config.render.samples_stratified + config.render.samples_surface
     labels = {
-        "field": f"field query, {config.tracking.rays * samples:,} points",
-        "tracking": f"tracking iteration, {config.tracking.rays} rays",
+        "field": f"field query, {config.tracking.render.rays * samples:,} points",
+        "tracking": f"tracking iteration, {config.tracking.render.rays} rays",
         "mapping": f"mapping iteration, {config.mapping.rays} rays / {WINDOW} views",
     }
     lines = [

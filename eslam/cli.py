@@ -8,7 +8,9 @@ from __future__ import annotations
 
 import argparse
 import os
+import signal
 import sys
+import threading
 from collections.abc import Sequence
 from pathlib import Path
 from typing import NoReturn
@@ -80,6 +82,18 @@ def _command_inspect(args: argparse.Namespace) -> int:
     return 0
 
 
+def _process_settings(config) -> None:
+    """What a run asks of the process, set here (the process's owner), never by run_slam:
+    torch's CPU threads and INFO messages of the "eslam" logger (they go to log.txt)."""
+    import logging
+
+    import torch
+
+    if config.threads > 0:
+        torch.set_num_threads(config.threads)
+    logging.getLogger("eslam").setLevel(logging.INFO)
+
+
 def _print_metrics(result) -> None:
     print(f"run folder: {result.run_dir}")
     for key, value in result.metrics.items():
@@ -102,6 +116,7 @@ def _command_run(args: argparse.Namespace) -> int:
             overrides.append(f"data.{option}={getattr(args, option)}")
     config = load_config(args.config, overrides)
     out = Path(args.out) if args.out else Path(default_run_name(args.config))
+    _process_settings(config)
     _print_metrics(run_slam(config, out, overwrite=args.overwrite))
     return 0
 
@@ -116,6 +131,7 @@ def _command_resume(args: argparse.Namespace) -> int:
     if not run.map.is_file():
         raise InputError(run.map, "not found: nothing to resume", "start the run with `eslam run`")
     config = load_config(run.config)
+    _process_settings(config)
     _print_metrics(run_slam(config, run.root, resume=True))
     return 0
 
@@ -143,9 +159,11 @@ def _command_mesh(args: argparse.Namespace) -> int:
 
 def _command_demo(args: argparse.Namespace) -> int:
     from eslam.evaluate.report import metrics_text
-    from eslam.workflows.demo import run_demo
+    from eslam.workflows.demo import demo_config, run_demo
 
-    result = run_demo(Path(args.out), tuple(args.overrides))
+    config = demo_config(Path(args.out), tuple(args.overrides))
+    _process_settings(config)
+    result = run_demo(Path(args.out), config)
     print(f"run folder: {result.run_dir} (report.md holds the table and plots)")
     print(metrics_text(result.metrics))
     return 0
@@ -482,14 +500,31 @@ def main(argv: Sequence[str] | None = None) -> int:
         if bad:
             parser.error(f"unrecognized arguments: {' '.join(bad)}")
         args.overrides = [*args.overrides, *extra]
+    previous = _terminate_as_interrupt()
     try:
         return int(args.handler(args))
     except ESLAMError as error:
         print(f"eslam {args.command}: error: {error}", file=sys.stderr)
         return EXIT_USER_ERROR
-    except KeyboardInterrupt:
-        print(f"eslam {args.command}: interrupted", file=sys.stderr)
+    except KeyboardInterrupt as interrupt:
+        detail = f": {interrupt}" if str(interrupt) else ""
+        print(f"eslam {args.command}: interrupted{detail}", file=sys.stderr)
         return 130
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
+
+
+def _raise_interrupt(signum: int, frame: object) -> NoReturn:
+    raise KeyboardInterrupt
+
+
+def _terminate_as_interrupt():
+    """Make SIGTERM stop a command like Ctrl-C (runs save their frames); return the old
+    handler, or None where signals cannot be set (not the main thread)."""
+    if threading.current_thread() is not threading.main_thread():
+        return None
+    return signal.signal(signal.SIGTERM, _raise_interrupt)
 
 
 if __name__ == "__main__":

@@ -34,3 +34,47 @@ class InputError(ESLAMError):
 
 class ConfigError(ESLAMError):
     """A configuration file or a command-line override is invalid."""
+
+
+class RunStopped(ESLAMError):
+    """A run stopped on an error after some frames were saved: it can be resumed.
+
+    The message is the cause's, followed by what was saved and how to continue.
+
+    Args:
+        cause: the error that stopped the run (an ESLAMError's message is kept as is).
+        frames: frames completed and saved in the run folder.
+        run_dir: the run folder.
+    """
+
+    def __init__(self, cause: BaseException, frames: int, run_dir: str | Path) -> None:
+        self.cause = cause
+        self.frames = frames
+        self.run_dir = Path(run_dir)
+        reason = str(cause) if isinstance(cause, ESLAMError) else _describe(cause)
+        super().__init__(
+            f"{reason}; the run stopped after {frames} frames, saved in {self.run_dir} "
+            f"(fix the cause, then continue with `eslam resume {self.run_dir}`)"
+        )
+
+
+def _describe(error: BaseException) -> str:
+    text = str(error).strip().splitlines()[0] if str(error).strip() else ""
+    return f"{type(error).__name__}: {text}" if text else type(error).__name__
+
+
+class RunInterrupted(KeyboardInterrupt):
+    """A run was interrupted (Ctrl-C, SIGTERM) after its completed frames were saved.
+
+    Args:
+        frames: frames completed and saved in the run folder.
+        run_dir: the run folder.
+    """
+
+    def __init__(self, frames: int, run_dir: str | Path) -> None:
+        self.frames = frames
+        self.run_dir = Path(run_dir)
+        super().__init__(
+            f"interrupted after {frames} frames, saved in {self.run_dir} "
+            f"(continue with `eslam resume {self.run_dir}`)"
+        )

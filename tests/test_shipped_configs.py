@@ -29,16 +29,16 @@ def test_config_loads_and_names_a_registered_layout(path: Path) -> None:
 def test_replica_scenes(scene: str) -> None:
     config = load_config(CONFIGS / "replica" / f"{scene}.yaml")
     assert config.scene.bound is not None
-    assert (config.tracking.iterations, config.mapping.iterations) == (8, 15)
-    assert (config.tracking.rays, config.mapping.rays) == (2000, 4000)
+    assert (config.tracking.render.iterations, config.mapping.iterations) == (8, 15)
+    assert (config.tracking.render.rays, config.mapping.rays) == (2000, 4000)
 
 
 @pytest.mark.parametrize("scene", ["0000", "0059", "0106", "0169", "0181", "0207"])
 def test_scannet_scenes(scene: str) -> None:
     config = load_config(CONFIGS / "scannet" / f"scene{scene}.yaml")
     assert config.data.format == "scannet" and config.scene.bound is not None
-    assert (config.tracking.iterations, config.mapping.iterations) == (30, 30)
-    assert (config.tracking.lr_translation, config.tracking.lr_rotation) == (0.0005, 0.0025)
+    assert (config.tracking.render.iterations, config.mapping.iterations) == (30, 30)
+    assert (config.tracking.render.lr_translation, config.tracking.render.lr_rotation) == (0.0005, 0.0025)
     assert config.output.mesh_resolution == 0.02
 
 
@@ -49,7 +49,7 @@ def test_tum_scenes(scene: str, camera: str) -> None:
     config = load_config(CONFIGS / "tum" / f"{scene}.yaml")
     assert config.data.format == "tum" and config.data.camera == camera
     assert config.scene.bound is not None
-    assert (config.tracking.iterations, config.tracking.rays) == (200, 5000)
+    assert (config.tracking.render.iterations, config.tracking.render.rays) == (200, 5000)
     assert (config.mapping.every, config.mapping.iterations, config.mapping.rays) == (1, 60, 5000)
     assert config.tracking.border == 20
 

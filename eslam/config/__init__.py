@@ -11,6 +11,7 @@ from eslam.config.loader import (
     save_config,
 )
 from eslam.config.schema import (
+    MOVED_KEYS,
     DataConfig,
     ESLAMConfig,
     FieldConfig,
@@ -19,12 +20,14 @@ from eslam.config.schema import (
     MappingConfig,
     OutputConfig,
     RenderConfig,
+    RenderTrackerConfig,
     SceneConfig,
     TrackingConfig,
 )
 
 __all__ = [
     "COMMAND_LINE",
+    "MOVED_KEYS",
     "DataConfig",
     "ESLAMConfig",
     "FieldConfig",
@@ -34,6 +37,7 @@ __all__ = [
     "MappingConfig",
     "OutputConfig",
     "RenderConfig",
+    "RenderTrackerConfig",
     "SceneConfig",
     "TrackingConfig",
     "config_from_dict",

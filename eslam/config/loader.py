@@ -29,7 +29,7 @@ from typing import Any, Literal, NamedTuple, TypeVar, Union
 import yaml
 
 from eslam.atomic import write_text
-from eslam.config.schema import ESLAMConfig
+from eslam.config.schema import MOVED_KEYS, ESLAMConfig
 from eslam.errors import ConfigError
 
 T = TypeVar("T")
@@ -137,6 +137,9 @@ def _origin(origins: Origins, path: tuple[str, ...], default: str) -> str:
 
 
 def _suggest(key: str, valid: Sequence[str], prefix: str) -> str:
+    moved = MOVED_KEYS.get(f"{prefix}{key}")
+    if moved is not None:
+        return f"it moved: use '{moved}'"
     match = difflib.get_close_matches(key, valid, n=1)
     if match:
         return f"did you mean '{prefix}{match[0]}'?"

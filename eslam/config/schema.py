@@ -191,8 +191,9 @@ class LossConfig:
 
 
 @dataclass
-class TrackingConfig:
-    """Camera tracking, once per frame (method.md section 4; Replica values)."""
+class RenderTrackerConfig:
+    """The paper's tracker (``tracking.method: render``): Adam on the rendering loss
+    (docs/method.md section 4; Replica values)."""
 
     iterations: int = 8
     """Optimisation steps per frame (Replica 8, ScanNet 30, TUM 200)."""
@@ -204,14 +205,55 @@ class TrackingConfig:
     """Adam learning rate of the quaternion (paper, Replica)."""
     adam_betas: tuple[float, float] = (0.5, 0.999)
     """Adam betas of the pose optimiser (release)."""
-    border: int = 75
-    """Pixels at the image border never sampled (release: 75 Replica and ScanNet, 20 TUM)."""
     outlier_factor: float = 10.0
     """Rays whose depth residual exceeds this times the batch median are dropped (release)."""
-    constant_velocity: bool = True
-    """Start from the constant-velocity prediction on SE(3); off starts from the last pose."""
     weights: LossWeights = field(default_factory=lambda: LossWeights(10.0, 200.0, 50.0, 1.0, 5.0))
     """Loss weights while tracking (paper: 10, 200, 50, 1, 5)."""
+
+    def __post_init__(self) -> None:
+        if self.iterations < 1 or self.rays < 1:
+            raise ValueError(
+                f"iterations and rays must be >= 1, got {self.iterations} and {self.rays}"
+            )
+
+
+TRACKING_METHODS = ("render",)
+"""Tracker names ``tracking.method`` takes (each a module behind the tracker protocol)."""
+
+
+@dataclass
+class TrackingConfig:
+    """Camera tracking, once per frame (docs/method.md section 4)."""
+
+    method: Literal["render"] = "render"
+    """Tracker: render = Adam on the rendering loss (paper); its settings are in
+    ``tracking.<method>``."""
+    border: int = 75
+    """Pixels at the image border never used (release: 75 Replica and ScanNet, 20 TUM)."""
+    constant_velocity: bool = True
+    """Motion model: start from the constant-velocity prediction on SE(3); off starts from
+    the last pose."""
+    render: RenderTrackerConfig = field(default_factory=RenderTrackerConfig)
+    """Settings of the rendering tracker (``method: render``)."""
+
+    def __post_init__(self) -> None:
+        if self.border < 0:
+            raise ValueError(f"border must be >= 0, got {self.border}")
+
+
+MOVED_KEYS = {
+    f"tracking.{name}": f"tracking.render.{name}"
+    for name in (
+        "iterations",
+        "rays",
+        "lr_translation",
+        "lr_rotation",
+        "adam_betas",
+        "outlier_factor",
+        "weights",
+    )
+}
+"""Keys that moved to another section (old name -> new name): the loader names the new one."""
 
 
 @dataclass

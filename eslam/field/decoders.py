@@ -8,6 +8,7 @@ truncation T. Appearance head: 3 outputs, sigmoid -> RGB in [0, 1].
 
 from __future__ import annotations
 
+import math
 from itertools import pairwise
 from typing import Literal
 
@@ -30,6 +31,7 @@ class MLPDecoder(nn.Module):
         layers: int,
         out_dim: int,
         activation: OutputActivation = "none",
+        generator: torch.Generator | None = None,
     ):
         """Build the layers.
 
@@ -39,6 +41,7 @@ class MLPDecoder(nn.Module):
             layers: number of hidden layers, >= 1 (paper 1, release 2).
             out_dim: outputs (1 for the TSDF, 3 for RGB).
             activation: applied to the output: tanh (TSDF), sigmoid (RGB) or none.
+            generator: CPU source of the initial weights (None: torch's global one).
         """
         super().__init__()
         if min(in_dim, hidden, layers, out_dim) < 1:
@@ -49,8 +52,8 @@ class MLPDecoder(nn.Module):
         if activation not in ("tanh", "sigmoid", "none"):
             raise ValueError(f"activation must be tanh, sigmoid or none, got {activation!r}")
         widths = [in_dim] + [hidden] * layers
-        self.hidden = nn.ModuleList(nn.Linear(a, b) for a, b in pairwise(widths))
-        self.output = nn.Linear(hidden, out_dim)
+        self.hidden = nn.ModuleList(_linear(a, b, generator) for a, b in pairwise(widths))
+        self.output = _linear(hidden, out_dim, generator)
         self.activation = activation
 
     def forward(self, features: torch.Tensor) -> torch.Tensor:
@@ -69,11 +72,30 @@ class MLPDecoder(nn.Module):
         return f"activation={self.activation}"
 
 
-def geometry_decoder(in_dim: int, hidden: int, layers: int) -> MLPDecoder:
+def _linear(in_dim: int, out_dim: int, generator: torch.Generator | None) -> nn.Linear:
+    """nn.Linear with torch's default initialisation drawn from ``generator``.
+
+    weight ~ kaiming_uniform(a = sqrt(5)) = U(-1/sqrt(in), 1/sqrt(in)) and bias ~
+    U(-1/sqrt(in), 1/sqrt(in)), in that order, exactly as ``nn.Linear.reset_parameters``
+    (so a generator seeded like the global one gives the same numbers).
+    """
+    layer = nn.Linear(in_dim, out_dim, device="meta").to_empty(device="cpu")
+    with torch.no_grad():
+        nn.init.kaiming_uniform_(layer.weight, a=math.sqrt(5), generator=generator)
+        bound = 1.0 / math.sqrt(in_dim)
+        nn.init.uniform_(layer.bias, -bound, bound, generator=generator)
+    return layer
+
+
+def geometry_decoder(
+    in_dim: int, hidden: int, layers: int, generator: torch.Generator | None = None
+) -> MLPDecoder:
     """The TSDF head: features -> s = tanh(MLP) in [-1, 1], units of T (paper)."""
-    return MLPDecoder(in_dim, hidden, layers, 1, "tanh")
+    return MLPDecoder(in_dim, hidden, layers, 1, "tanh", generator)
 
 
-def appearance_decoder(in_dim: int, hidden: int, layers: int) -> MLPDecoder:
+def appearance_decoder(
+    in_dim: int, hidden: int, layers: int, generator: torch.Generator | None = None
+) -> MLPDecoder:
     """The colour head: features -> RGB = sigmoid(MLP) in [0, 1] (paper)."""
-    return MLPDecoder(in_dim, hidden, layers, 3, "sigmoid")
+    return MLPDecoder(in_dim, hidden, layers, 3, "sigmoid", generator)

@@ -364,8 +364,19 @@ class PlaneLevel(nn.Module):
         vertices: (3,) int64 buffer (in the state_dict): the grid (nx, ny, nz).
     """
 
-    def __init__(self, grid: Sequence[int], channels: int, init_std: float, fast: bool = True):
-        """Planes for a grid of (nx, ny, nz) vertices with ``channels`` features each."""
+    def __init__(
+        self,
+        grid: Sequence[int],
+        channels: int,
+        init_std: float,
+        fast: bool = True,
+        generator: torch.Generator | None = None,
+    ):
+        """Planes for a grid of (nx, ny, nz) vertices with ``channels`` features each.
+
+        Features start as N(0, init_std^2) draws from ``generator`` (a CPU generator;
+        None: torch's global one).
+        """
         super().__init__()
         self.fast = fast
         self.init_std = float(init_std)
@@ -373,7 +384,7 @@ class PlaneLevel(nn.Module):
         shapes = plane_shapes(grid)
         planes = torch.zeros(3, channels, max(h for h, _ in shapes), max(w for _, w in shapes))
         for i, (h, w) in enumerate(shapes):
-            planes[i, :, :h, :w].normal_(0.0, init_std)
+            planes[i, :, :h, :w].normal_(0.0, init_std, generator=generator)
         self.register_buffer("window", torch.tensor(IDENTITY_WINDOW))
         self.register_buffer("vertices", torch.tensor(grid, dtype=torch.int64))
         self._set_grid(grid, planes)
@@ -467,8 +478,12 @@ class PlaneSet(nn.Module):
         levels: Literal["both", "coarse", "fine"] = "both",
         fusion: Literal["concat", "sum"] = "concat",
         fast: bool = True,
+        generator: torch.Generator | None = None,
     ):
-        """Planes over the fitted (3, 2) ``bound`` with (coarse, fine) cell sizes in metres."""
+        """Planes over the fitted (3, 2) ``bound`` with (coarse, fine) cell sizes in metres.
+
+        Initial features are drawn from ``generator`` (CPU; None: torch's global one).
+        """
         super().__init__()
         if levels not in ("both", *LEVEL_NAMES):
             raise ValueError(f"levels must be both, coarse or fine, got {levels!r}")
@@ -478,7 +493,7 @@ class PlaneSet(nn.Module):
         names = LEVEL_NAMES if levels == "both" else (levels,)
         self.levels = nn.ModuleDict(
             {
-                name: PlaneLevel(grid_size(bound, res), channels, init_std, fast)
+                name: PlaneLevel(grid_size(bound, res), channels, init_std, fast, generator)
                 for name, res in zip(LEVEL_NAMES, resolution, strict=True)
                 if name in names
             }

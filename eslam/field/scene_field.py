@@ -36,13 +36,17 @@ class SceneField(nn.Module):
         appearance_decoder: features -> RGB in [0, 1] (sigmoid).
     """
 
-    def __init__(self, config: FieldConfig, bound: torch.Tensor):
+    def __init__(
+        self, config: FieldConfig, bound: torch.Tensor, generator: torch.Generator | None = None
+    ):
         """Build planes over ``bound`` fitted to ``config.bound_multiple``.
 
         Args:
             config: plane and decoder settings.
             bound: (3, 2) [[xmin, xmax], [ymin, ymax], [zmin, zmax]], metres; any float
                 dtype or device (the field is built on the CPU; move it with ``.to``).
+            generator: CPU generator of the initial planes and decoder weights (a run
+                passes one seeded with its seed); None draws from torch's global one.
         """
         super().__init__()
         self.config = config
@@ -56,6 +60,7 @@ class SceneField(nn.Module):
             levels=config.levels,
             fusion=config.level_fusion,
             fast=fast,
+            generator=generator,
         )
         self.geometry = PlaneSet(fitted, config.geometry_resolution, **common)
         self.appearance = (
@@ -65,8 +70,10 @@ class SceneField(nn.Module):
         )
         colour_planes = self.geometry if self.appearance is None else self.appearance
         hidden, layers = config.decoder_hidden, config.decoder_layers
-        self.geometry_decoder = geometry_decoder(self.geometry.out_dim, hidden, layers)
-        self.appearance_decoder = appearance_decoder(colour_planes.out_dim, hidden, layers)
+        self.geometry_decoder = geometry_decoder(self.geometry.out_dim, hidden, layers, generator)
+        self.appearance_decoder = appearance_decoder(
+            colour_planes.out_dim, hidden, layers, generator
+        )
         self.beta = nn.Parameter(
             torch.tensor(float(config.beta_init)), requires_grad=config.learn_beta
         )
@@ -81,7 +88,7 @@ class SceneField(nn.Module):
         """
         if "bound" not in state:
             raise KeyError("field state has no 'bound' entry (not a SceneField state_dict?)")
-        field = cls(config, state["bound"])
+        field = cls(config, state["bound"], torch.Generator())  # overwritten below
         state = dict(state)
         for name, level in field.named_modules():
             if not isinstance(level, PlaneLevel):

@@ -90,6 +90,8 @@ def render_rays(
     config: RenderConfig,
     perturb: bool,
     generator: torch.Generator | None = None,
+    *,
+    check: bool = True,
 ) -> RenderOutput:
     """Render rays with a measured depth D: ESLAM's depth-guided sampling and compositing.
 
@@ -102,11 +104,13 @@ def render_rays(
         rays: N rays; every ``rays.depth`` must be finite and > 0.
         perturb: jitter the samples within their bins (True while optimising).
         generator: randomness of the jitter.
+        check: verify that every ray has a depth (a host sync). The optimisation steps
+            pass False: they draw rays only through pixels with depth, and must not sync.
 
     Raises:
-        ValueError: when a ray has no valid depth.
+        ValueError: when ``check`` and a ray has no valid depth.
     """
-    if not bool(torch.isfinite(rays.depth).all() & (rays.depth > 0).all()):
+    if check and not bool(torch.isfinite(rays.depth).all() & (rays.depth > 0).all()):
         raise ValueError(
             "render_rays needs a finite depth > 0 on every ray; "
             "use render_rays_without_depth for rays without depth"

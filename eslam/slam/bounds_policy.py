@@ -16,16 +16,16 @@ Points outside the bound are never dropped silently: they read the planes' borde
 from __future__ import annotations
 
 import logging
+from pathlib import Path
 
 import numpy as np
 import torch
 
 from eslam.config import SceneConfig
-from eslam.data import RGBDSequence
 from eslam.errors import ConfigError, InputError
 from eslam.field.scene_field import SceneField
 from eslam.geometry.bounds import bound_coverage, depth_points, estimate_bound
-from eslam.types import Intrinsics
+from eslam.types import Frame, Intrinsics
 
 log = logging.getLogger("eslam")
 
@@ -34,55 +34,57 @@ AUTO_BOUND_SEARCH = 30
 """Frames searched, from frame 0, for the first with valid depth to estimate the bound."""
 
 
-def first_pose(sequence: RGBDSequence) -> torch.Tensor:
+def first_pose(frame: Frame) -> torch.Tensor:
     """(4, 4) float32 pose of frame 0: its ground truth (it fixes the world frame), else identity.
 
-    Frame 0 without usable ground truth (a NaN row, e.g. ScanNet's lost tracking) also
-    starts at the identity, with a warning: the world frame then differs from the
-    ground truth's, which a configured scene.bound may not fit (the ATE aligns the two).
+    Frame 0 without usable ground truth (none, or a NaN matrix, e.g. ScanNet's lost
+    tracking) starts at the identity; with a NaN matrix a warning says so: the world
+    frame then differs from the ground truth's, which a configured scene.bound may not
+    fit (the ATE aligns the two).
     """
-    gt = sequence.gt_poses()
-    if gt is None:
+    if frame.pose_gt is None:
         return torch.eye(4)
-    if not np.all(np.isfinite(gt[0])):
+    if not np.all(np.isfinite(frame.pose_gt)):
         log.warning(
             "frame 0 has no usable ground-truth pose: the run starts at the identity, so "
             "its world frame differs from the ground truth's (a configured scene.bound "
             "may not fit; the ATE aligns the two)"
         )
         return torch.eye(4)
-    return torch.from_numpy(gt[0]).float()
+    return torch.from_numpy(frame.pose_gt).float()
 
 
 def _format(bound: torch.Tensor) -> str:
     return str([[round(float(v), 3) for v in row] for row in bound.tolist()])
 
 
-def initial_bound(scene: SceneConfig, sequence: RGBDSequence) -> torch.Tensor:
-    """(3, 2) float32 scene bound: ``scene.bound``, or estimated from frame 0 (module doc).
+def check_depth_found(frames_without_depth: int, source: str) -> None:
+    """Refuse a source whose first AUTO_BOUND_SEARCH frames have no depth (no bound set).
 
     Raises:
-        InputError: no bound is set and frame 0 has no valid depth.
-        ConfigError: the estimated bound is wider than ``scene.max_extent``.
+        InputError: ``frames_without_depth`` reached :data:`AUTO_BOUND_SEARCH`.
     """
-    if scene.bound is not None:
-        return torch.tensor(scene.bound, dtype=torch.float32)
-    pose = first_pose(sequence).double()
-    points = torch.zeros(0, 3, dtype=torch.float64)
-    for index in range(min(len(sequence), AUTO_BOUND_SEARCH)):
-        # the first frame with depth, placed at frame 0's pose (the camera has barely
-        # moved yet; growth covers what this misses)
-        frame = sequence[index]
-        points = depth_points(torch.from_numpy(frame.depth).double(), frame.intrinsics, pose)
-        if len(points):
-            break
-    if len(points) == 0:
+    if frames_without_depth >= AUTO_BOUND_SEARCH:
         raise InputError(
-            sequence.root,
+            Path(source),
             f"none of the first {AUTO_BOUND_SEARCH} frames has valid depth, so no scene "
             "bound can be estimated",
             "check the depth images, or set scene.bound=[[xmin,xmax],[ymin,ymax],[zmin,zmax]]",
         )
+
+
+def bound_from_frame(scene: SceneConfig, frame: Frame, pose: torch.Tensor) -> torch.Tensor:
+    """(3, 2) float32 scene bound from the first frame with depth, seen from ``pose``
+    (frame 0's: the camera has barely moved yet; growth covers what this misses).
+
+    Raises:
+        ValueError: the frame has no valid depth.
+        ConfigError: the estimated bound is wider than ``scene.max_extent``.
+    """
+    pose = pose.detach().cpu().double()
+    points = depth_points(torch.from_numpy(frame.depth).double(), frame.intrinsics, pose)
+    if len(points) == 0:
+        raise ValueError("the frame has no valid depth")
     bound = estimate_bound(points, scene.auto_bound_margin, centres=pose[:3, 3]).float()
     widest = float((bound[:, 1] - bound[:, 0]).max())
     if widest > scene.max_extent:

@@ -1,6 +1,7 @@
 """Keyframes: a compact image store, and the policies choosing the mapping window.
 
-Every mapped frame becomes a keyframe (method.md section 5). The store keeps colour
+Every mapped frame becomes a keyframe (docs/method.md section 5); :class:`KeyframeSchedule`
+decides which frames are mapped. The store keeps colour
 as uint8 and depth as uint16 with :data:`DEPTH_UNITS_PER_METRE` units per metre, i.e.
 5 bytes a pixel: 500 keyframes of 1200 x 680 take 500 * 680 * 1200 * 5 bytes = 2.0 GB
 on the store's device (``mapping.keyframe_device``; put them on the CPU when the GPU is
@@ -24,6 +25,7 @@ import torch
 
 from eslam.config import MappingConfig
 from eslam.geometry.camera import pixels_to_camera_directions
+from eslam.slam.trajectory import Trajectory
 from eslam.types import Frame, Intrinsics
 
 DEPTH_UNITS_PER_METRE = 5000.0
@@ -36,16 +38,22 @@ _MIN_VISIBLE_DEPTH = 1e-6  # metres; points closer (or behind) are not in view
 
 
 class KeyframeStore:
-    """Keyframe images (compressed), their frame indices and refined poses.
+    """Keyframe images (compressed) and the frames they come from.
+
+    The store does not own poses: a keyframe's pose is its frame's entry in the run's
+    :class:`~eslam.slam.trajectory.Trajectory` (which mapping refines), read through
+    :attr:`poses`.
 
     Args:
         intrinsics: the camera of every keyframe.
-        device: where the images and poses live.
+        trajectory: the run's pose estimates, indexed by frame.
+        device: where the images live.
         capacity: keyframes to allocate room for at first (grows by doubling).
         depth_units_per_metre: depth quantisation (default :data:`DEPTH_UNITS_PER_METRE`).
 
     Attributes:
         intrinsics: the camera.
+        trajectory: the pose estimates the keyframes' poses are read from.
         device: the store's device.
         depth_units_per_metre: stored depth units per metre.
         far_depth_pixels: depth pixels beyond the storable range, stored as invalid.
@@ -54,6 +62,7 @@ class KeyframeStore:
     def __init__(
         self,
         intrinsics: Intrinsics,
+        trajectory: Trajectory,
         device: torch.device | str = "cpu",
         capacity: int = 16,
         depth_units_per_metre: float = DEPTH_UNITS_PER_METRE,
@@ -63,31 +72,30 @@ class KeyframeStore:
         if not depth_units_per_metre > 0:
             raise ValueError(f"depth_units_per_metre must be > 0, got {depth_units_per_metre}")
         self.intrinsics = intrinsics
+        self.trajectory = trajectory
         self.device = torch.device(device)
         self.depth_units_per_metre = float(depth_units_per_metre)
         self.far_depth_pixels = 0
         self._count = 0
         self._frame_indices: list[int] = []
-        self._rgb, self._depth, self._poses = self._allocate(capacity)
+        self._rgb, self._depth = self._allocate(capacity)
 
-    def _allocate(self, capacity: int) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    def _allocate(self, capacity: int) -> tuple[torch.Tensor, torch.Tensor]:
         h, w = self.intrinsics.height, self.intrinsics.width
         return (
             torch.empty((capacity, h, w, 3), dtype=torch.uint8, device=self.device),
             torch.empty((capacity, h, w), dtype=torch.uint16, device=self.device),
-            torch.full((capacity, 4, 4), float("nan"), dtype=torch.float32, device=self.device),
         )
 
     def _reserve(self, needed: int) -> None:
         """Make room for ``needed`` keyframes, at least doubling (amortised O(1) add)."""
         if needed <= self.capacity:
             return
-        rgb, depth, poses = self._allocate(max(needed, 2 * self.capacity))
+        rgb, depth = self._allocate(max(needed, 2 * self.capacity))
         n = self._count
         rgb[:n] = self._rgb[:n]
         depth[:n] = self._depth[:n]
-        poses[:n] = self._poses[:n]
-        self._rgb, self._depth, self._poses = rgb, depth, poses
+        self._rgb, self._depth = rgb, depth
 
     def __len__(self) -> int:
         return self._count
@@ -99,17 +107,19 @@ class KeyframeStore:
 
     @property
     def nbytes(self) -> int:
-        """Bytes held by the buffers (capacity, not just the keyframes stored)."""
-        return sum(t.element_size() * t.nelement() for t in (self._rgb, self._depth, self._poses))
+        """Bytes held by the image buffers (capacity, not just the keyframes stored)."""
+        return sum(t.element_size() * t.nelement() for t in (self._rgb, self._depth))
 
     @property
     def poses(self) -> torch.Tensor:
-        """(K, 4, 4) float32 camera-to-world poses on the store's device (a view)."""
-        return self._poses[: self._count]
+        """(K, 4, 4) float32 camera-to-world poses of the keyframes (from the trajectory),
+        on the store's device."""
+        index = torch.tensor(self._frame_indices, dtype=torch.int64)
+        return self.trajectory.poses[index.to(self.trajectory.device)].to(self.device)
 
     @property
     def frame_indices(self) -> tuple[int, ...]:
-        """Sequence index of the frame behind each keyframe."""
+        """Trajectory index of the frame behind each keyframe."""
         return tuple(self._frame_indices)
 
     def _check_id(self, k: int) -> int:
@@ -125,37 +135,37 @@ class KeyframeStore:
         codes[far | (codes < 0)] = 0
         return torch.from_numpy(codes.astype(np.uint16))
 
-    def add(self, frame: Frame, pose: torch.Tensor | np.ndarray) -> int:
-        """Store ``frame`` with its (4, 4) camera-to-world ``pose``; return its keyframe id.
+    def add(self, frame: Frame, index: int) -> int:
+        """Store ``frame``, whose pose is trajectory entry ``index``; return its keyframe id.
 
         Depth is quantised to 1 / depth_units_per_metre (nearest); NaN, infinite,
         negative and too-far depths become 0 (invalid).
+
+        Raises:
+            ValueError: a frame of another size, or no finite pose at ``index``.
         """
         h, w = self.intrinsics.height, self.intrinsics.width
         if frame.rgb.shape != (h, w, 3) or frame.depth.shape != (h, w):
             raise ValueError(
-                f"frame {frame.index} is {frame.depth.shape[1]}x{frame.depth.shape[0]}, "
+                f"frame {index} is {frame.depth.shape[1]}x{frame.depth.shape[0]}, "
                 f"the keyframes are {w}x{h}"
             )
-        pose = self._check_pose(pose)
+        if not 0 <= index < len(self.trajectory) or not bool(
+            torch.isfinite(self.trajectory.poses[index]).all()
+        ):
+            raise ValueError(f"frame {index} has no finite pose in the trajectory")
         k = self._count
         self._reserve(k + 1)
         self._rgb[k] = torch.from_numpy(np.ascontiguousarray(frame.rgb)).to(self.device)
         self._depth[k] = self._encode_depth(frame.depth).to(self.device)
-        self._poses[k] = pose
-        self._frame_indices.append(int(frame.index))
+        self._frame_indices.append(int(index))
         self._count = k + 1
         return k
 
-    def _check_pose(self, pose: torch.Tensor | np.ndarray) -> torch.Tensor:
-        pose = torch.as_tensor(pose).detach().to(device=self.device, dtype=torch.float32)
-        if pose.shape != (4, 4) or not bool(torch.isfinite(pose).all()):
-            raise ValueError(f"pose must be a finite (4, 4) matrix, got shape {tuple(pose.shape)}")
-        return pose
-
-    def set_pose(self, k: int, pose: torch.Tensor | np.ndarray) -> None:
-        """Replace the pose of keyframe ``k`` (the mapper's refinement)."""
-        self._poses[self._check_id(k)] = self._check_pose(pose)
+    def truncate(self, count: int) -> None:
+        """Forget the keyframes from id ``count`` on (a frame whose processing failed)."""
+        self._count = min(self._count, count)
+        del self._frame_indices[self._count :]
 
     def rgb(self, k: int, device: torch.device | str | None = None) -> torch.Tensor:
         """(H, W, 3) float32 colour in [0, 1] of keyframe ``k`` on ``device`` (default: store's)."""
@@ -173,15 +183,15 @@ class KeyframeStore:
         return self._depth[: self._count]
 
     def state_dict(self) -> dict:
-        """Compact CPU copies of the keyframes (tensors and plain numbers only).
+        """Compact CPU copies of the keyframe images (tensors and plain numbers only).
 
-        Loads with ``torch.load(weights_only=True)``; see :meth:`from_state_dict`.
+        Loads with ``torch.load(weights_only=True)``; see :meth:`from_state_dict`. The
+        poses are the trajectory's, saved with it.
         """
         n = self._count
         return {
             "rgb": self._rgb[:n].to("cpu", copy=True),
             "depth": self._depth[:n].to("cpu", copy=True),
-            "poses": self._poses[:n].to("cpu", copy=True),
             "frame_indices": torch.tensor(self._frame_indices, dtype=torch.int64),
             "intrinsics": dataclasses.asdict(self.intrinsics),
             "depth_units_per_metre": self.depth_units_per_metre,
@@ -189,31 +199,60 @@ class KeyframeStore:
         }
 
     @classmethod
-    def from_state_dict(cls, state: dict, device: torch.device | str = "cpu") -> KeyframeStore:
-        """Rebuild a store saved by :meth:`state_dict` on ``device``.
+    def from_state_dict(
+        cls, state: dict, trajectory: Trajectory, device: torch.device | str = "cpu"
+    ) -> KeyframeStore:
+        """Rebuild a store saved by :meth:`state_dict` on ``device``, over ``trajectory``.
 
         Raises:
             KeyError: a missing entry.
-            ValueError: entries whose shapes disagree with each other or the camera.
+            ValueError: entries whose shapes disagree with each other or the camera, or
+                frame indices the trajectory does not hold.
         """
         intrinsics = Intrinsics(**state["intrinsics"])
-        rgb, depth, poses = state["rgb"], state["depth"], state["poses"]
-        indices = state["frame_indices"]
+        rgb, depth = state["rgb"], state["depth"]
+        indices = [int(i) for i in state["frame_indices"]]
         n, h, w = len(indices), intrinsics.height, intrinsics.width
-        expected = {"rgb": (n, h, w, 3), "depth": (n, h, w), "poses": (n, 4, 4)}
-        for name, tensor in (("rgb", rgb), ("depth", depth), ("poses", poses)):
+        expected = {"rgb": (n, h, w, 3), "depth": (n, h, w)}
+        for name, tensor in (("rgb", rgb), ("depth", depth)):
             if tuple(tensor.shape) != expected[name]:
                 raise ValueError(
                     f"keyframe {name} has shape {tuple(tensor.shape)}, expected {expected[name]}"
                 )
-        store = cls(intrinsics, device, max(n, 1), float(state["depth_units_per_metre"]))
+        if any(not 0 <= i < len(trajectory) for i in indices):
+            raise ValueError(f"keyframe frame indices {indices} outside the trajectory")
+        store = cls(
+            intrinsics, trajectory, device, max(n, 1), float(state["depth_units_per_metre"])
+        )
         store._rgb[:n] = rgb.to(store.device, torch.uint8)
         store._depth[:n] = depth.to(store.device, torch.uint16)
-        store._poses[:n] = poses.to(store.device, torch.float32)
-        store._frame_indices = [int(i) for i in indices]
+        store._frame_indices = indices
         store._count = n
         store.far_depth_pixels = int(state["far_depth_pixels"])
         return store
+
+
+@dataclass(frozen=True)
+class KeyframeSchedule:
+    """Which frames become keyframes (and are mapped): the paper's fixed interval.
+
+    Frame ``i`` is a keyframe when ``i % every == 0``, when no keyframe exists yet (the
+    first frame with depth), and at the end of the stream (its last frame, unless it is
+    one already). Frames without valid depth never are.
+
+    Attributes:
+        every: the interval k (paper: 4 Replica, 4 ScanNet, 1 TUM).
+    """
+
+    every: int
+
+    def __post_init__(self) -> None:
+        if self.every < 1:
+            raise ValueError(f"every must be >= 1, got {self.every}")
+
+    def is_keyframe(self, index: int, has_depth: bool, keyframes: int) -> bool:
+        """Whether frame ``index`` is mapped as it arrives (``keyframes`` exist so far)."""
+        return has_depth and (keyframes == 0 or index % self.every == 0)
 
 
 class WindowStrategy(Protocol):

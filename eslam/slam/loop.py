@@ -1,16 +1,28 @@
-"""The run loop: track every frame, map every k-th, write the run folder (design.md).
+"""The run loop: frames in, observers out (ARCHITECTURE.md).
 
-Single process, sequential, seeded. The loop alone orchestrates; tracking, mapping,
-keyframes, rendering and losses are called from here and know nothing of each other.
-A checkpoint (map.pt) is written every ``output.checkpoint_every`` frames and at the
-end; ``resume=True`` continues from it and ends with the same outputs (and, on CPU,
-the same trajectory) as an uninterrupted run.
+Single process, sequential, seeded. :func:`run_slam` opens the input (a recorded
+sequence from ``config.data``, or any :class:`~eslam.data.source.FrameSource`), then
+:class:`RunLoop` takes the frames one at a time: the tracker
+(:mod:`eslam.slam.trackers`, chosen by ``tracking.method``) estimates each frame's pose
+from the motion model's guess, the keyframe schedule says which frames are mapped,
+and mapping refines the map and the window's poses. When the stream ends, its last
+frame is mapped too. Everything the world sees goes through observers: the run writer
+(checkpoints, trajectory, metrics, mesh), the log, the progress bar, and any passed in.
+
+Nothing here needs the length of the input, and nothing changes process-wide state
+(thread count, logger levels, the global random generator): the CLI owns those.
+
+A frame that fails half way (unreadable file, out of memory, Ctrl-C) is rolled back,
+the completed frames are checkpointed, and the error says how to resume.
 """
 
 from __future__ import annotations
 
+import contextlib
 import logging
+import threading
 import time
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -19,21 +31,44 @@ import torch
 
 from eslam.config import ESLAMConfig, save_config
 from eslam.config.device import resolve_device
-from eslam.data import RGBDSequence, open_sequence, sequence_timestamps
-from eslam.errors import ConfigError, InputError
-from eslam.evaluate.trajectory import absolute_trajectory_error
-from eslam.geometry.pose import extrapolate_constant_velocity
-from eslam.io.run_dir import RunDirectory, prepare_run_directory, write_json
-from eslam.io.trajectory import write_tum_trajectory
+from eslam.data import RGBDSequence, open_sequence
+from eslam.data.source import FrameSource, SequenceSource, source_length
+from eslam.errors import ConfigError, ESLAMError, InputError, RunInterrupted, RunStopped
+from eslam.io.run_dir import RunDirectory, prepare_run_directory
 from eslam.render.rays import camera_directions
-from eslam.slam.bounds_policy import cover_keyframe, first_pose
-from eslam.slam.mapping import MappingSettings, map_window
-from eslam.slam.progress import RunProgress, peak_memory_mb
-from eslam.slam.state import SLAMState, initial_state, load_state, save_state
-from eslam.slam.tracking import TrackingSettings, track_frame
-from eslam.slam.views import View, make_view
+from eslam.slam.bounds_policy import (
+    bound_from_frame,
+    check_depth_found,
+    cover_keyframe,
+    first_pose,
+)
+from eslam.slam.keyframes import KeyframeSchedule
+from eslam.slam.mapping import MappingSettings, map_window, mapping_schedule
+from eslam.slam.observers import (
+    FrameDone,
+    LogObserver,
+    MappingDone,
+    Observers,
+    RunEnd,
+    RunObserver,
+    RunStart,
+)
+from eslam.slam.progress import ProgressObserver, finite_ate_pairs
+from eslam.slam.resources import PeakMemory, device_clock
+from eslam.slam.run_writer import RunWriter
+from eslam.slam.state import (
+    SLAMState,
+    initial_state,
+    load_state,
+    new_field,
+)
+from eslam.slam.trackers import make_tracker, predict_pose
+from eslam.slam.views import make_view
+from eslam.types import Frame
 
 log = logging.getLogger("eslam")
+
+__all__ = ["RunLoop", "RunResult", "finite_ate_pairs", "preflight", "run_slam"]
 
 
 @dataclass(frozen=True)
@@ -51,82 +86,206 @@ class RunResult:
     metrics: dict
 
 
-def _frame_view(frame, directions: torch.Tensor, device: torch.device, border: int) -> View:
-    rgb = torch.from_numpy(frame.rgb).to(device).float() / 255.0
-    depth = torch.from_numpy(frame.depth).to(device)
-    return make_view(rgb, depth, directions, border)
-
-
-def _is_mapped(index: int, frames: int, every: int) -> bool:
-    return index % every == 0 or index == frames - 1
-
-
-def _frame_name(sequence: RGBDSequence, index: int) -> str:
-    timestamps = sequence_timestamps(sequence)
-    return f"timestamp {timestamps[index]:.6f}"
-
-
-def finite_ate_pairs(estimated: np.ndarray, gt: np.ndarray) -> np.ndarray:
-    """(N,) bool: frames whose estimated and ground-truth poses are both finite.
-
-    Frames without usable ground truth (NaN rows, e.g. ScanNet's lost tracking) are kept
-    out of the ATE.
-    """
-    return np.isfinite(estimated).all(axis=(1, 2)) & np.isfinite(gt).all(axis=(1, 2))
-
-
-def run_slam(
-    config: ESLAMConfig,
-    run_dir: str | Path,
-    resume: bool = False,
-    stop_after: int | None = None,
-    overwrite: bool = False,
-) -> RunResult:
-    """Run ESLAM on ``config.data`` and write the run folder ``run_dir``.
-
-    The input is checked before anything is written (the sequence opens, its first
-    and last frames read and pass the reader's checks), so bad input leaves an earlier
-    run in ``run_dir`` untouched.
+class RunLoop:
+    """Processes frames one at a time against a run's state (module doc).
 
     Args:
-        config: the fully resolved configuration (saved as config.yaml).
-        run_dir: output folder (created); see :class:`~eslam.io.run_dir.RunDirectory`.
-        resume: continue from ``run_dir/map.pt`` instead of starting afresh.
-        stop_after: stop (checkpointed) after this many frames in total, as an
-            interruption would; used by tests of ``resume``.
-        overwrite: start a new run in a folder that already holds one (its files are
-            replaced one by one as the new run writes them).
-
-    Raises:
-        ConfigError, InputError: bad configuration or input, before any file is written.
+        config: the run's configuration.
+        state: the state to advance (fresh or resumed).
+        device: the compute device.
+        observers: told about every frame and mapping call.
+        source: the input's name, for messages.
     """
-    if config.data.path is None:
-        raise ConfigError("data.path is not set (pass --data PATH or set data.path in the config)")
-    if config.threads > 0:
-        torch.set_num_threads(config.threads)
-    device = resolve_device(config.device)
-    sequence = open_sequence(config.data)
-    preflight(sequence)
-    run = RunDirectory(Path(run_dir)) if resume else prepare_run_directory(run_dir, overwrite)
-    handler = logging.FileHandler(run.log, mode="a", encoding="utf-8")
-    handler.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(message)s"))
-    log.addHandler(handler)
-    log.setLevel(logging.INFO)
-    try:
-        if resume:
-            state = load_state(run.map, config, device)
-            log.info("resuming %s at frame %d", config.data.path, state.next_frame)
+
+    def __init__(
+        self,
+        config: ESLAMConfig,
+        state: SLAMState,
+        device: torch.device,
+        observers: RunObserver,
+        source: str,
+    ) -> None:
+        self.config = config
+        self.state = state
+        self.device = device
+        self.observers = observers
+        self.source = source
+        self.tracker = make_tracker(config)
+        self.schedule = KeyframeSchedule(config.mapping.every)
+        self.mapping = MappingSettings(config.mapping, config.render, config.loss)
+        self.directions = camera_directions(state.keyframes.intrinsics, device)
+        self.last_frame: Frame | None = None
+        self._frames_without_depth = 0
+        self._field_before: dict[str, torch.Tensor] | None = None
+
+    def run(self, frames: Iterable[Frame], total: int | None, stop_after: int | None) -> RunEnd:
+        """Process ``frames`` (``total`` of them in the whole run, None if unknown) until
+        they end or ``stop_after`` frames are done; map the last frame at the end.
+
+        On any error the frame in progress is rolled back before the error propagates.
+        """
+        state = self.state
+        began = time.perf_counter()
+        iterator: Iterator[Frame] = iter(frames)
+        complete = True
+        while True:
+            if stop_after is not None and state.next_frame >= stop_after:
+                complete = total is not None and state.next_frame >= total
+                break
+            mark = state.mark()
+            self._field_before = None
+            try:
+                frame = next(iterator, None)
+                if frame is None:
+                    break
+                self.process(frame)
+            except BaseException:
+                self._rollback(mark)
+                raise
+        if complete:
+            mark = state.mark()
+            self._field_before = None
+            try:
+                self.map_last_frame()
+            except BaseException:
+                self._rollback(mark)
+                raise
+        return RunEnd(
+            complete=complete, frames=state.next_frame, wall_s=time.perf_counter() - began
+        )
+
+    def _rollback(self, mark) -> None:
+        field_before = None
+        if self._field_before is not None and self.state.field is not None:
+            from eslam.field.scene_field import SceneField
+
+            field_before = SceneField.from_state(self.config.field, self._field_before)
+            field_before = field_before.to(self.device)
+        self.state.rollback(mark, field_before)
+
+    def process(self, frame: Frame) -> None:
+        """Track ``frame``, map it if it is a keyframe, tell the observers."""
+        state = self.state
+        index = state.next_frame
+        started = device_clock(self.device)
+        has_depth = bool(frame.valid_depth.any())
+        if not has_depth:
+            log.warning(
+                "frame %d (timestamp %.6f) has no valid depth: skipped (pose predicted, "
+                "not tracked or mapped)",
+                index,
+                frame.timestamp,
+            )
+        tracked = False
+        if index == 0:
+            pose = first_pose(frame).to(self.device)
         else:
-            save_config(config, run.config)
-            state = initial_state(config, sequence, device)
-            log.info("run on %s: %d frames, device %s", config.data.path, len(sequence), device)
-        _process(config, sequence, state, run, device, stop_after)
-        result = _finish(config, sequence, state, run, device)
-        log.info("metrics %s", result.metrics)
-        return result
-    finally:
-        log.removeHandler(handler)
-        handler.close()
+            pose = predict_pose(state.trajectory.poses, self.config.tracking.constant_velocity)
+            if has_depth and state.field is not None and len(state.keyframes) > 0:
+                rgb = torch.from_numpy(frame.rgb).to(self.device).float() / 255.0
+                depth = torch.from_numpy(frame.depth).to(self.device)
+                view = make_view(rgb, depth, self.directions, self.config.tracking.border)
+                if view.sampleable_pixels() > 0:
+                    pose = self.tracker.track(state.field, view, pose, state.generator).pose
+                    tracked = True
+        if state.field is None:
+            self._create_field(frame, has_depth, pose)
+        state.trajectory.append(pose, frame.timestamp, frame.pose_gt)
+        done_tracking = device_clock(self.device)
+        mapped = self.schedule.is_keyframe(index, has_depth, len(state.keyframes))
+        if mapped:
+            self.map_frame(frame, index)
+        state.last_mapped = mapped or not has_depth
+        done = device_clock(self.device)
+        state.tracking_time.append(done_tracking - started)
+        state.mapping_time.append(done - done_tracking)
+        self.last_frame = frame
+        self.observers.on_frame(
+            FrameDone(
+                index=index,
+                pose=state.trajectory.poses[index],
+                tracked=tracked,
+                mapped=mapped,
+                tracking_s=done_tracking - started,
+                mapping_s=done - done_tracking,
+            )
+        )
+
+    def _create_field(self, frame: Frame, has_depth: bool, pose: torch.Tensor) -> None:
+        """Build the field from the first frame with depth, seen from frame 0's pose."""
+        if not has_depth:
+            self._frames_without_depth += 1
+            check_depth_found(self._frames_without_depth, self.source)
+            return
+        first = self.state.trajectory.poses[0] if len(self.state.trajectory) else pose
+        bound = bound_from_frame(self.config.scene, frame, first)
+        self.state.field = new_field(self.config, bound, self.device)
+
+    def map_frame(self, frame: Frame, index: int) -> None:
+        """Make frame ``index`` a keyframe and run one mapping call on its window."""
+        state = self.state
+        field = state.field
+        if field is None:
+            raise RuntimeError("mapping before the field exists")
+        self._field_before = {k: v.detach().clone() for k, v in field.state_dict().items()}
+        store = state.keyframes
+        current = store.add(frame, index)
+        pose = state.trajectory.poses[index]
+        state.bound_warned = cover_keyframe(
+            field,
+            store.depth(current, self.device),
+            store.intrinsics,
+            pose,
+            self.config.scene,
+            state.generator,
+            state.bound_warned,
+        )
+        window = state.window.select(store, current, state.generator)
+        views = [
+            make_view(store.rgb(k, self.device), store.depth(k, self.device), self.directions)
+            for k in window
+        ]
+        frame_of = store.frame_indices
+        oldest = min(window, key=lambda k: frame_of[k])
+        optimise = [self.config.mapping.optimise_poses and k != oldest for k in window]
+        iterations, lr_factor = mapping_schedule(self.config.mapping, first=len(store) == 1)
+        result = map_window(
+            field,
+            views,
+            store.poses[window].to(self.device),
+            optimise,
+            self.mapping,
+            iterations=iterations,
+            lr_factor=lr_factor,
+            generator=state.generator,
+        )
+        moved = [i for i, flag in enumerate(optimise) if flag]
+        if moved:
+            state.trajectory.set_poses([frame_of[window[i]] for i in moved], result.poses[moved])
+        self.observers.on_mapping(
+            MappingDone(
+                index=index,
+                window=tuple(frame_of[k] for k in window),
+                iterations=iterations,
+                loss=result.loss,
+            )
+        )
+
+    def map_last_frame(self) -> None:
+        """At the end of the stream: map its last frame unless that happened already."""
+        state = self.state
+        if state.last_mapped:
+            return
+        if self.last_frame is None:
+            raise InputError(
+                Path(self.source),
+                "the last frame of the stream must be mapped, but it is no longer available",
+                "start the run again",
+            )
+        started = device_clock(self.device)
+        self.map_frame(self.last_frame, state.next_frame - 1)
+        state.mapping_time[-1] += device_clock(self.device) - started
+        state.last_mapped = True
 
 
 def preflight(sequence: RGBDSequence) -> None:
@@ -134,6 +293,7 @@ def preflight(sequence: RGBDSequence) -> None:
 
     Opening a sequence already checked its layout, file pairs and poses; reading two
     frames checks the images (readable, sizes, depth units) before a run writes anything.
+    Only recorded input has a last frame to read; a live source is checked as it goes.
 
     Raises:
         InputError: no frames, or a frame fails its reader's checks.
@@ -145,137 +305,129 @@ def preflight(sequence: RGBDSequence) -> None:
         sequence[len(sequence) - 1]
 
 
-def _process(
+class _ThreadFilter(logging.Filter):
+    """Pass only records logged by one thread (the run's), so concurrent runs keep
+    their own log files."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.thread = threading.get_ident()
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        return record.thread == self.thread
+
+
+@contextlib.contextmanager
+def run_log(path: Path) -> Iterator[logging.Handler]:
+    """Append the "eslam" logger's records from this thread to ``path`` while inside;
+    yield the file handler (the run's own lines are written to it directly).
+
+    The logger's level is left alone: warnings always reach the file, the library's
+    INFO messages (bound estimates and growth) when the level allows (the CLI sets
+    INFO; a script chooses its own).
+    """
+    handler = logging.FileHandler(path, mode="a", encoding="utf-8")
+    handler.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(message)s"))
+    handler.addFilter(_ThreadFilter())
+    log.addHandler(handler)
+    try:
+        yield handler
+    finally:
+        log.removeHandler(handler)
+        handler.close()
+
+
+def _open_input(
+    config: ESLAMConfig, source: FrameSource | None
+) -> tuple[FrameSource | None, RGBDSequence | None]:
+    if source is not None:
+        return source, None
+    if config.data.path is None:
+        raise ConfigError("data.path is not set (pass --data PATH or set data.path in the config)")
+    sequence = open_sequence(config.data)
+    preflight(sequence)
+    return None, sequence
+
+
+def run_slam(
     config: ESLAMConfig,
-    sequence: RGBDSequence,
-    state: SLAMState,
-    run: RunDirectory,
-    device: torch.device,
-    stop_after: int | None,
-) -> None:
-    frames = len(sequence)
-    end = frames if stop_after is None else min(frames, stop_after)
-    directions = camera_directions(sequence.intrinsics, device)
-    tracking = TrackingSettings(config.tracking, config.render, config.loss)
-    mapping = MappingSettings(config.mapping, config.render, config.loss)
-    gt = sequence.gt_poses()
-    progress = RunProgress(frames, state.next_frame, config.output.progress, gt)
-    for index in range(state.next_frame, end):
-        frame = sequence[index]
-        start = time.perf_counter()
-        has_depth = bool(frame.valid_depth.any())
-        if not has_depth:
-            log.warning(
-                "frame %d (%s) has no valid depth: skipped (pose predicted, not tracked or mapped)",
-                index,
-                _frame_name(sequence, index),
-            )
-        if index == 0:
-            pose = first_pose(sequence).to(device)
-        else:
-            previous = state.poses[index - 1]
-            initial = previous
-            if config.tracking.constant_velocity and index >= 2:
-                initial = extrapolate_constant_velocity(state.poses[index - 2], previous)
-            view = _frame_view(frame, directions, device, config.tracking.border)
-            if not has_depth or len(view.candidates) == 0 or len(state.keyframes) == 0:
-                pose = initial
-            else:
-                pose = track_frame(state.field, view, initial, tracking, state.generator).pose
-        state.poses[index] = pose
-        tracked = time.perf_counter()
-        first_map = len(state.keyframes) == 0
-        if has_depth and (first_map or _is_mapped(index, frames, config.mapping.every)):
-            _map(config, state, frame, index, directions, mapping, device)
-        mapped = time.perf_counter()
-        state.tracking_time.append(tracked - start)
-        state.mapping_time.append(mapped - tracked)
-        state.next_frame = index + 1
-        progress.update(index, state.poses[: index + 1])
-        if state.next_frame % config.output.checkpoint_every == 0 or state.next_frame == end:
-            save_state(run.map, state)
-            log.info("checkpoint after frame %d", index)
-    progress.close()
-
-
-def _map(
-    config: ESLAMConfig,
-    state: SLAMState,
-    frame,
-    index: int,
-    directions: torch.Tensor,
-    settings: MappingSettings,
-    device: torch.device,
-) -> None:
-    store = state.keyframes
-    current = store.add(frame, state.poses[index])
-    state.bound_warned = cover_keyframe(
-        state.field,
-        store.depth(current, device),
-        store.intrinsics,
-        state.poses[index],
-        config.scene,
-        state.generator,
-        state.bound_warned,
-    )
-    window = state.window.select(store, current, state.generator)
-    views = [
-        make_view(store.rgb(k, device), store.depth(k, device), directions, border=0)
-        for k in window
-    ]
-    oldest = min(window, key=lambda k: store.frame_indices[k])
-    optimise = [config.mapping.optimise_poses and k != oldest for k in window]
-    first = len(store) == 1
-    result = map_window(
-        state.field,
-        views,
-        torch.stack([store.poses[k] for k in window]).to(device),
-        optimise,
-        settings,
-        iterations=config.mapping.first_iterations if first else config.mapping.iterations,
-        lr_factor=config.mapping.first_lr_factor if first else 1.0,
-        generator=state.generator,
-    )
-    log.info("mapped frame %d: window %s, loss %.5f", index, list(window), result.loss)
-    for k, pose, moved in zip(window, result.poses, optimise, strict=True):
-        if moved:
-            store.set_pose(k, pose)
-            state.poses[store.frame_indices[k]] = pose
-
-
-def _finish(
-    config: ESLAMConfig,
-    sequence: RGBDSequence,
-    state: SLAMState,
-    run: RunDirectory,
-    device: torch.device,
+    run_dir: str | Path,
+    resume: bool = False,
+    stop_after: int | None = None,
+    overwrite: bool = False,
+    *,
+    source: FrameSource | None = None,
+    observers: Sequence[RunObserver] = (),
 ) -> RunResult:
-    done = state.next_frame
-    poses = state.poses[:done].detach().cpu().double().numpy()
-    timestamps = sequence_timestamps(sequence)[:done]
-    write_tum_trajectory(run.trajectory, timestamps, poses)
-    gt = sequence.gt_poses()
-    metrics: dict = {
-        "frames": done,
-        "device": str(device),
-        "fpt_s": float(np.sum(state.tracking_time) + np.sum(state.mapping_time)) / max(done, 1),
-        "peak_memory_mb": peak_memory_mb(device),
-    }
-    if gt is not None:
-        usable = finite_ate_pairs(poses, gt[:done])
-        write_tum_trajectory(run.trajectory_gt, timestamps[usable], gt[:done][usable])
-        if usable.sum() >= 3:
-            metrics.update(absolute_trajectory_error(poses[usable], gt[:done][usable]).as_cm())
-            metrics["ate_frames"] = int(usable.sum())
-    write_json(
-        run.timings,
-        {"tracking_s": list(state.tracking_time), "mapping_s": list(state.mapping_time)},
-    )
-    if config.output.mesh and done == len(sequence):
-        from eslam.data.mesh_io import write_mesh_ply
-        from eslam.mesh.extract import extract_mesh
+    """Run ESLAM and write the run folder ``run_dir``.
 
-        mesh = extract_mesh(state.field, config.output.mesh_resolution, state.observed_views())
-        write_mesh_ply(run.mesh, mesh)
-    write_json(run.metrics, metrics)
-    return RunResult(run_dir=run.root, poses=poses, metrics=metrics)
+    Recorded input (``config.data``, when ``source`` is None) is checked before
+    anything is written (the sequence opens, its first and last frames read and pass
+    the reader's checks), so bad input leaves an earlier run in ``run_dir`` untouched.
+
+    Args:
+        config: the fully resolved configuration (saved as config.yaml).
+        run_dir: output folder (created); see :class:`~eslam.io.run_dir.RunDirectory`.
+        resume: continue from ``run_dir/map.pt`` instead of starting afresh. A recorded
+            sequence continues at the next frame; a given ``source`` must yield the
+            frames that follow the checkpoint.
+        stop_after: stop (checkpointed) after this many frames in total, as an
+            interruption would; used by tests of ``resume``.
+        overwrite: start a new run in a folder that already holds one (its files are
+            replaced one by one as the new run writes them).
+        source: frames to run on instead of ``config.data`` (a live stream, a generator:
+            :class:`~eslam.data.source.IterableSource`); its length may be unknown.
+        observers: more observers (a viewer, a stream of poses), called after the run
+            writer, the log and the progress bar.
+
+    Raises:
+        ConfigError, InputError: bad configuration or input, before any file is written.
+        RunStopped: an error after frames were processed (they are saved; resume).
+        RunInterrupted: Ctrl-C (or the CLI's SIGTERM) after frames were processed.
+    """
+    device = resolve_device(config.device)
+    source, sequence = _open_input(config, source)
+    intrinsics = source.intrinsics if source is not None else sequence.intrinsics  # type: ignore[union-attr]
+    run = RunDirectory(Path(run_dir)) if resume else prepare_run_directory(run_dir, overwrite)
+    with run_log(run.log) as log_file:
+        if resume:
+            state = load_state(run.map, config, device)
+        else:
+            save_config(config, run.config)
+            state = initial_state(config, intrinsics, device)
+        if sequence is not None:
+            source = SequenceSource(sequence, start=state.next_frame)
+        assert source is not None
+        remaining = source_length(source)
+        total = None if remaining is None else state.next_frame + remaining
+        memory = PeakMemory(device)
+        memory.start()
+        writer = RunWriter(run, config, memory)
+        everyone = Observers(
+            [writer, LogObserver(log_file), ProgressObserver(config.output.progress), *observers]
+        )
+        loop = RunLoop(config, state, device, everyone, source.name)
+        if resume and not state.last_mapped and isinstance(source, SequenceSource):
+            loop.last_frame = source.frame(state.next_frame - 1)
+        everyone.on_start(RunStart(config, run.root, state, device, source.name, remaining, resume))
+        try:
+            end = loop.run(source, total, stop_after)
+        except BaseException as error:
+            everyone.on_failure(error, state.next_frame)
+            stopped = _stopped(error, state.next_frame, run.root)
+            if stopped is error:
+                raise
+            raise stopped from error
+        everyone.on_finish(end)
+        poses = state.trajectory.poses.detach().cpu().double().numpy()
+        return RunResult(run_dir=run.root, poses=poses, metrics=dict(writer.metrics or {}))
+
+
+def _stopped(error: BaseException, frames: int, run_dir: Path) -> BaseException:
+    """What to raise for ``error`` after ``frames`` frames were saved in ``run_dir``."""
+    if frames == 0:
+        return error
+    if isinstance(error, KeyboardInterrupt):
+        return RunInterrupted(frames, run_dir)
+    resumable = isinstance(error, ESLAMError | OSError | MemoryError | torch.cuda.OutOfMemoryError)
+    return RunStopped(error, frames, run_dir) if resumable else error

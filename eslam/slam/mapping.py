@@ -1,4 +1,4 @@
-"""Mapping: jointly optimise the map and the window's keyframe poses (method.md section 5).
+"""Mapping: jointly optimise the map and the window's keyframe poses (docs/method.md section 5).
 
 Each iteration draws the same number of rays from every keyframe of the window (the
 total is ``mapping.rays``), renders them with the field, and steps Adam on the shared
@@ -6,6 +6,10 @@ loss with the mapping weights. Planes, decoders (and beta) and, when enabled, th
 poses of every window keyframe but the oldest are optimised together (the paper's
 joint optimisation); the oldest pose stays fixed to anchor the window. A fresh
 optimiser is made per call, as in the release, so the map file needs no optimiser state.
+
+:func:`mapping_step` is one iteration and never synchronises with the host; the
+benchmarks time this same function. :func:`mapping_schedule` says how long each call
+optimises (the first frame longer and faster, as the release does).
 """
 
 from __future__ import annotations
@@ -37,11 +41,117 @@ class MappingResult:
 
     Attributes:
         poses: (W, 4, 4) refined camera-to-world poses of the window (fixed ones unchanged).
-        loss: loss of the last iteration (nan when no iteration ran).
+        loss: 0-d tensor, loss of the last iteration (nan when no iteration ran).
     """
 
     poses: torch.Tensor
-    loss: float
+    loss: torch.Tensor
+
+
+def mapping_schedule(config: MappingConfig, first: bool) -> tuple[int, float]:
+    """(iterations, learning-rate factor) of a mapping call.
+
+    The first call (the map is empty) runs ``first_iterations`` at ``first_lr_factor``
+    times the learning rates (release: 1000 at 5x); later calls ``iterations`` at 1x.
+    """
+    if first:
+        return config.first_iterations, config.first_lr_factor
+    return config.iterations, 1.0
+
+
+@dataclass(frozen=True, eq=False)
+class WindowPoses:
+    """The window's poses as the optimiser sees them.
+
+    Attributes:
+        fixed: (W, 4, 4) poses at the start of the call (rows of refined poses unused).
+        movable: (M,) int64 window rows whose poses are refined (on the device).
+        quaternions: (M, 4) leaf tensor with gradients, or None when M = 0.
+        translations: (M, 3) leaf tensor with gradients, or None when M = 0.
+    """
+
+    fixed: torch.Tensor
+    movable: torch.Tensor
+    quaternions: torch.Tensor | None
+    translations: torch.Tensor | None
+
+    @classmethod
+    def create(cls, poses: torch.Tensor, optimise: list[bool]) -> WindowPoses:
+        """Variables for the rows of ``poses`` (W, 4, 4) flagged in ``optimise``."""
+        fixed = poses.detach().clone()
+        rows = [i for i, flag in enumerate(optimise) if flag]
+        movable = torch.tensor(rows, dtype=torch.int64, device=fixed.device)
+        if not rows:
+            return cls(fixed, movable, None, None)
+        quaternions, translations = quaternion_translation_from_pose(fixed[rows])
+        return cls(
+            fixed,
+            movable,
+            quaternions.clone().requires_grad_(True),
+            translations.clone().requires_grad_(True),
+        )
+
+    def parameters(self) -> list[torch.Tensor]:
+        """The pose variables (empty when no pose is refined)."""
+        if self.quaternions is None or self.translations is None:
+            return []
+        return [self.quaternions, self.translations]
+
+    def current(self) -> torch.Tensor:
+        """(W, 4, 4) poses with the refined rows, differentiable w.r.t. the variables."""
+        if self.quaternions is None or self.translations is None:
+            return self.fixed
+        refined = pose_from_quaternion_translation(self.quaternions, self.translations)
+        return self.fixed.index_put((self.movable,), refined)
+
+
+def mapping_optimiser(
+    field: SceneField, window: WindowPoses, config: MappingConfig, lr_factor: float
+) -> torch.optim.Adam:
+    """Adam over planes, decoders (and beta) at ``lr_factor`` times their rates, and poses."""
+    groups = [
+        {"params": field.plane_parameters(), "lr": config.lr_planes * lr_factor},
+        {"params": field.decoder_parameters(), "lr": config.lr_decoders * lr_factor},
+    ]
+    if window.parameters():
+        groups.append({"params": window.parameters(), "lr": config.lr_poses})
+    return torch.optim.Adam(groups)
+
+
+def mapping_step(
+    field: SceneField,
+    views: list[View],
+    window: WindowPoses,
+    optimiser: torch.optim.Optimizer,
+    settings: MappingSettings,
+    generator: torch.Generator,
+) -> torch.Tensor:
+    """One mapping iteration over the window; returns the loss (0-d, detached, before the step).
+
+    ``mapping.rays // W`` rays from each view at its current pose. No host
+    synchronisation and fixed shapes.
+    """
+    rays_per_view = max(1, settings.mapping.rays // len(views))
+    current = window.current()
+    rays = concatenate_rays(
+        [
+            sample_view_rays(view, current[k], rays_per_view, generator)
+            for k, view in enumerate(views)
+        ]
+    )
+    output = render_rays(
+        field,
+        rays,
+        settings.render,
+        perturb=settings.render.perturb,
+        generator=generator,
+        check=False,
+    )
+    terms = compute_losses(output, rays, settings.mapping.weights, field.truncation, settings.loss)
+    optimiser.zero_grad(set_to_none=True)
+    terms.total.backward()
+    optimiser.step()
+    return terms.total.detach()
 
 
 def map_window(
@@ -63,40 +173,11 @@ def map_window(
         iterations: optimisation steps.
         lr_factor: multiplier of the map learning rates (5 for the first frame, release).
     """
-    config = settings.mapping
-    poses = poses.detach().clone()
-    movable = [i for i, flag in enumerate(optimise) if flag]
-    groups = [
-        {"params": field.plane_parameters(), "lr": config.lr_planes * lr_factor},
-        {"params": field.decoder_parameters(), "lr": config.lr_decoders * lr_factor},
-    ]
-    quaternions = translations = None
-    if movable:
-        quaternions, translations = quaternion_translation_from_pose(poses[movable])
-        quaternions = quaternions.clone().requires_grad_(True)
-        translations = translations.clone().requires_grad_(True)
-        groups.append({"params": [quaternions, translations], "lr": config.lr_poses})
-    optimiser = torch.optim.Adam(groups)
-    rays_per_view = max(1, config.rays // len(views))
-    loss = float("nan")
+    window = WindowPoses.create(poses, optimise)
+    optimiser = mapping_optimiser(field, window, settings.mapping, lr_factor)
+    loss = torch.full((), float("nan"), device=window.fixed.device)
     for _ in range(iterations):
-        current = poses
-        if movable:
-            refined = pose_from_quaternion_translation(quaternions, translations)
-            current = poses.index_put((torch.tensor(movable, device=poses.device),), refined)
-        rays = concatenate_rays(
-            [
-                sample_view_rays(view, current[k], rays_per_view, generator)
-                for k, view in enumerate(views)
-            ]
-        )
-        output = render_rays(field, rays, settings.render, perturb=True, generator=generator)
-        terms = compute_losses(output, rays, config.weights, field.truncation, settings.loss)
-        optimiser.zero_grad(set_to_none=True)
-        terms.total.backward()
-        optimiser.step()
-        loss = float(terms.total.detach())
-    if movable:
-        with torch.no_grad():
-            poses[movable] = pose_from_quaternion_translation(quaternions, translations)
-    return MappingResult(poses=poses, loss=loss)
+        loss = mapping_step(field, views, window, optimiser, settings, generator)
+    with torch.no_grad():
+        refined = window.current().detach().clone()
+    return MappingResult(poses=refined, loss=loss)

@@ -1,10 +1,15 @@
 """The state of a run, and its checkpoint (map.pt): everything needed to resume.
 
-map.pt holds the field (planes, decoders, beta, bound), every pose estimated so far,
-the keyframes (compact) with their refined poses, the random generator's state and the
-timings. No optimiser state is needed: tracking and mapping make fresh optimisers per
-call (as the release does), so a run resumed after frame i continues exactly as an
-uninterrupted one would.
+map.pt holds the field (planes, decoders, beta, bound), the trajectory so far (poses,
+timestamps, ground truth), the keyframes (compact images and frame indices), the random
+generator's state and the timings. No optimiser state is needed: tracking and mapping
+make fresh optimisers per call (as the release does), so a run resumed after frame i
+continues exactly as an uninterrupted one would.
+
+The state changes only at frame boundaries as far as anyone outside the loop can tell:
+:meth:`SLAMState.mark` notes where a frame starts and :meth:`SLAMState.rollback` undoes
+a frame that failed half way (the field is restored from a copy taken before mapping),
+so a checkpoint written after a failure holds exactly the completed frames.
 """
 
 from __future__ import annotations
@@ -15,13 +20,13 @@ from pathlib import Path
 import torch
 
 from eslam.config import ESLAMConfig
-from eslam.data import RGBDSequence
 from eslam.errors import InputError
 from eslam.field.scene_field import SceneField
 from eslam.io.checkpoint import load_checkpoint, save_checkpoint
 from eslam.mesh.observed import ObservedViews
-from eslam.slam.bounds_policy import initial_bound
-from eslam.slam.keyframes import KeyframeStore, make_window_strategy
+from eslam.slam.keyframes import KeyframeStore, WindowStrategy, make_window_strategy
+from eslam.slam.trajectory import Trajectory
+from eslam.types import Intrinsics
 
 
 @dataclass(eq=False)
@@ -29,26 +34,33 @@ class SLAMState:
     """Mutable state of a run between frames.
 
     Attributes:
-        field: the scene field (on the run's device).
-        keyframes: the keyframe store.
+        field: the scene field (on the run's device); None until the first frame with
+            depth fixes the bound (when ``scene.bound`` is not set).
+        trajectory: every frame's pose estimate, timestamp and ground truth so far.
+        keyframes: the keyframe store (poses read from ``trajectory``).
         window: the keyframe window strategy.
-        poses: (N, 4, 4) float32 camera-to-world estimates; rows >= next_frame unset.
-        next_frame: index of the next frame to process.
         generator: the run's random generator (on the run's device).
         tracking_time / mapping_time: seconds per processed frame.
+        last_mapped: whether the last processed frame needs no mapping at the end of the
+            stream (it is a keyframe, or has no depth, or no frame was processed).
         bound_warned: whether the run warned about depth points outside the bound
             (once per run; not saved, so a resumed run may warn once more).
     """
 
-    field: SceneField
+    field: SceneField | None
+    trajectory: Trajectory
     keyframes: KeyframeStore
-    window: object
-    poses: torch.Tensor
-    next_frame: int
+    window: WindowStrategy
     generator: torch.Generator
     tracking_time: list[float] = field(default_factory=list)
     mapping_time: list[float] = field(default_factory=list)
+    last_mapped: bool = True
     bound_warned: bool = False
+
+    @property
+    def next_frame(self) -> int:
+        """Index of the next frame to process (= frames processed so far)."""
+        return len(self.trajectory)
 
     def observed_views(self) -> ObservedViews:
         """The keyframes as observed space for mesh extraction.
@@ -56,6 +68,8 @@ class SLAMState:
         The depth maps stay in the store (uint16 codes on the keyframe device, no copy);
         observed space reaches T (the field's truncation) behind each measured depth.
         """
+        if self.field is None:
+            raise ValueError("no frame with depth was mapped: there is no observed space")
         store = self.keyframes
         return ObservedViews(
             poses=store.poses.clone(),
@@ -65,66 +79,124 @@ class SLAMState:
             depth_scale=1.0 / store.depth_units_per_metre,
         )
 
+    def mark(self) -> FrameMark:
+        """Where the next frame starts, to :meth:`rollback` to if it fails half way."""
+        return FrameMark(
+            frames=len(self.trajectory),
+            keyframes=len(self.keyframes),
+            generator=self.generator.get_state(),
+            last_mapped=self.last_mapped,
+        )
 
-def _generator(config: ESLAMConfig, device: torch.device) -> torch.Generator:
+    def rollback(self, mark: FrameMark, field_before: SceneField | None) -> None:
+        """Undo everything after ``mark``; ``field_before`` is the field as it was then
+        (a copy taken before mapping changed it), or None when the field was untouched."""
+        self.trajectory.truncate(mark.frames)
+        self.keyframes.truncate(mark.keyframes)
+        self.generator.set_state(mark.generator)
+        del self.tracking_time[mark.frames :]
+        del self.mapping_time[mark.frames :]
+        self.last_mapped = mark.last_mapped
+        if field_before is not None:
+            self.field = field_before
+
+
+@dataclass(frozen=True, eq=False)
+class FrameMark:
+    """The state's sizes and generator at the start of a frame (see SLAMState.mark)."""
+
+    frames: int
+    keyframes: int
+    generator: torch.Tensor
+    last_mapped: bool
+
+
+def copy_field(field: SceneField) -> SceneField:
+    """An independent copy of ``field`` on its device (to restore after a failed frame)."""
+    device = field.bound.device
+    state = {k: v.detach().clone() for k, v in field.state_dict().items()}
+    return SceneField.from_state(field.config, state).to(device)
+
+
+def run_generator(config: ESLAMConfig, device: torch.device) -> torch.Generator:
+    """The run's random generator on ``device``, seeded with ``config.seed``."""
     generator = torch.Generator(device=device)
     generator.manual_seed(config.seed)
     return generator
 
 
-def initial_state(config: ESLAMConfig, sequence: RGBDSequence, device: torch.device) -> SLAMState:
-    """A fresh state for ``sequence``: new field, no keyframes, seeded generator.
+def new_field(config: ESLAMConfig, bound: torch.Tensor, device: torch.device) -> SceneField:
+    """A fresh field over ``bound``, its features drawn from a CPU generator seeded with
+    ``config.seed`` (no global random state is read or changed)."""
+    generator = torch.Generator().manual_seed(config.seed)
+    return SceneField(config.field, bound, generator).to(device)
 
-    The field covers ``config.scene.bound``, or a bound estimated from frame 0
-    (:func:`~eslam.slam.bounds_policy.initial_bound`).
-    """
-    torch.manual_seed(config.seed)
-    field_ = SceneField(config.field, initial_bound(config.scene, sequence)).to(device)
+
+def initial_state(config: ESLAMConfig, intrinsics: Intrinsics, device: torch.device) -> SLAMState:
+    """A fresh state: no frames, no keyframes, seeded generator; the field is built now
+    over ``scene.bound`` when it is set, else from the first frame with depth."""
+    trajectory = Trajectory(device)
     keyframe_device = torch.device(config.mapping.keyframe_device or device)
+    bound = config.scene.bound
     return SLAMState(
-        field=field_,
-        keyframes=KeyframeStore(sequence.intrinsics, keyframe_device),
+        field=None if bound is None else new_field(config, torch.tensor(bound), device),
+        trajectory=trajectory,
+        keyframes=KeyframeStore(intrinsics, trajectory, keyframe_device),
         window=make_window_strategy(config.mapping),
-        poses=torch.full((len(sequence), 4, 4), float("nan"), device=device),
-        next_frame=0,
-        generator=_generator(config, device),
+        generator=run_generator(config, device),
     )
 
 
 def save_state(path: Path, state: SLAMState) -> None:
     """Write the checkpoint ``path`` (atomically)."""
+    field_state = None
+    if state.field is not None:
+        field_state = {k: v.detach().cpu() for k, v in state.field.state_dict().items()}
     save_checkpoint(
         path,
         {
-            "field": {k: v.detach().cpu() for k, v in state.field.state_dict().items()},
+            "field": field_state,
+            "trajectory": state.trajectory.state_dict(),
             "keyframes": state.keyframes.state_dict(),
-            "poses": state.poses.detach().cpu(),
-            "next_frame": state.next_frame,
             "generator": state.generator.get_state(),
             "tracking_time": list(state.tracking_time),
             "mapping_time": list(state.mapping_time),
+            "last_mapped": state.last_mapped,
         },
     )
 
 
 def load_state(path: Path, config: ESLAMConfig, device: torch.device) -> SLAMState:
-    """Read the checkpoint ``path`` back into a state on ``device``."""
+    """Read the checkpoint ``path`` back into a state on ``device``.
+
+    Raises:
+        InputError: a map written by another configuration or an older eslam.
+    """
     saved = load_checkpoint(path, map_location="cpu")
+    if "trajectory" not in saved:
+        raise InputError(
+            path,
+            "was written by an older eslam (no trajectory record), so it cannot be resumed",
+            "start the run again with `eslam run ... --overwrite`",
+        )
     try:
-        field_ = SceneField.from_state(config.field, saved["field"]).to(device)
+        field_ = None
+        if saved["field"] is not None:
+            field_ = SceneField.from_state(config.field, saved["field"]).to(device)
+        trajectory = Trajectory.from_state_dict(saved["trajectory"], device)
         keyframe_device = torch.device(config.mapping.keyframe_device or device)
-        keyframes = KeyframeStore.from_state_dict(saved["keyframes"], keyframe_device)
+        keyframes = KeyframeStore.from_state_dict(saved["keyframes"], trajectory, keyframe_device)
         generator = torch.Generator(device=device)
         generator.set_state(saved["generator"])
         return SLAMState(
             field=field_,
+            trajectory=trajectory,
             keyframes=keyframes,
             window=make_window_strategy(config.mapping),
-            poses=saved["poses"].to(device),
-            next_frame=int(saved["next_frame"]),
             generator=generator,
             tracking_time=list(saved["tracking_time"]),
             mapping_time=list(saved["mapping_time"]),
+            last_mapped=bool(saved["last_mapped"]),
         )
     except (KeyError, RuntimeError, ValueError) as error:
         raise InputError(

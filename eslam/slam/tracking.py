@@ -1,10 +1,15 @@
-"""Camera tracking: optimise one frame's pose against the frozen map (method.md section 4).
+"""The rendering tracker (``tracking.method: render``): Adam on the rendering loss.
 
-The pose is a quaternion (x, y, z, w) and a translation, optimised with Adam (fresh
-optimiser per frame, betas from the config) for a fixed number of iterations; each
-iteration samples rays away from the image border, renders them, and steps on the
-shared loss (:func:`eslam.losses.compute_losses`) with tracking weights and the 10x
-median outlier rejection. The pose with the lowest loss seen is returned.
+docs/method.md section 4. The pose is a quaternion (x, y, z, w) and a translation,
+optimised with Adam (fresh optimiser per frame, betas from the config) for a fixed
+number of iterations; each iteration samples rays away from the image border, renders
+them, and steps on the shared loss (:func:`eslam.losses.compute_losses`) with tracking
+weights and the 10x median outlier rejection. The pose with the lowest loss seen is
+returned.
+
+:func:`tracking_step` is one iteration and never synchronises with the host: the
+best loss and pose are kept on the device (:func:`keep_best`), so a frame's iterations
+queue up on a GPU without waiting. The benchmarks time this same function.
 """
 
 from __future__ import annotations
@@ -13,7 +18,7 @@ from dataclasses import dataclass
 
 import torch
 
-from eslam.config import LossConfig, RenderConfig, TrackingConfig
+from eslam.config import LossConfig, RenderConfig, RenderTrackerConfig
 from eslam.geometry.pose import pose_from_quaternion_translation, quaternion_translation_from_pose
 from eslam.losses import compute_losses
 from eslam.render.renderer import SceneFieldLike, render_rays
@@ -22,9 +27,9 @@ from eslam.slam.views import View, sample_view_rays
 
 @dataclass(frozen=True)
 class TrackingSettings:
-    """What ``track_frame`` needs from the configuration."""
+    """What the rendering tracker needs from the configuration."""
 
-    tracking: TrackingConfig
+    tracking: RenderTrackerConfig
     render: RenderConfig
     loss: LossConfig
 
@@ -35,11 +40,12 @@ class TrackingResult:
 
     Attributes:
         pose: (4, 4) float32 camera-to-world pose with the lowest loss.
-        loss: that lowest loss.
+        loss: 0-d tensor on the compute device, that lowest loss (read it with
+            ``float()`` between frames, not inside the iterations).
     """
 
     pose: torch.Tensor
-    loss: float
+    loss: torch.Tensor
 
 
 class frozen:
@@ -58,6 +64,93 @@ class frozen:
             parameter.requires_grad_(flag)
 
 
+@dataclass(frozen=True, eq=False)
+class PoseVariables:
+    """A pose as the optimiser sees it: a quaternion (x, y, z, w) and a translation.
+
+    Attributes:
+        quaternion: (4,) leaf tensor with gradients (normalised when the pose is built).
+        translation: (3,) leaf tensor with gradients, metres.
+    """
+
+    quaternion: torch.Tensor
+    translation: torch.Tensor
+
+    @classmethod
+    def from_pose(cls, pose: torch.Tensor) -> PoseVariables:
+        """Variables starting at the (4, 4) ``pose``."""
+        quaternion, translation = quaternion_translation_from_pose(pose.detach())
+        return cls(
+            quaternion.clone().requires_grad_(True), translation.clone().requires_grad_(True)
+        )
+
+    def pose(self) -> torch.Tensor:
+        """(4, 4) camera-to-world pose, differentiable with respect to the variables."""
+        return pose_from_quaternion_translation(self.quaternion, self.translation)
+
+
+def pose_optimiser(variables: PoseVariables, config: RenderTrackerConfig) -> torch.optim.Adam:
+    """Adam over the translation and quaternion with their own learning rates (release)."""
+    return torch.optim.Adam(
+        [
+            {"params": [variables.translation], "lr": config.lr_translation},
+            {"params": [variables.quaternion], "lr": config.lr_rotation},
+        ],
+        betas=config.adam_betas,
+    )
+
+
+def tracking_step(
+    field: SceneFieldLike,
+    view: View,
+    variables: PoseVariables,
+    optimiser: torch.optim.Optimizer,
+    settings: TrackingSettings,
+    generator: torch.Generator,
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """One tracking iteration: render rays at the current pose, step Adam on the loss.
+
+    No host synchronisation: no ``float()``, ``.item()`` or ``bool()`` of device
+    tensors, fixed shapes (``settings.tracking.rays`` rays). Call it with the field
+    frozen (:class:`frozen`).
+
+    Returns:
+        The loss (0-d, detached) and the (4, 4) pose it was computed at (detached),
+        both before the step.
+    """
+    config = settings.tracking
+    c2w = variables.pose()
+    rays = sample_view_rays(view, c2w, config.rays, generator)
+    output = render_rays(
+        field,
+        rays,
+        settings.render,
+        perturb=settings.render.perturb,
+        generator=generator,
+        check=False,
+    )
+    terms = compute_losses(
+        output,
+        rays,
+        config.weights,
+        field.truncation,
+        settings.loss,
+        outlier_factor=config.outlier_factor,
+    )
+    optimiser.zero_grad(set_to_none=True)
+    terms.total.backward()
+    optimiser.step()
+    return terms.total.detach(), c2w.detach()
+
+
+def keep_best(
+    best_loss: torch.Tensor, best_pose: torch.Tensor, loss: torch.Tensor, pose: torch.Tensor
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """The lower of two (loss, pose) pairs, chosen on the device (ties keep the old pair)."""
+    better = loss < best_loss
+    return torch.where(better, loss, best_loss), torch.where(better, pose, best_pose)
+
+
 def track_frame(
     field: SceneFieldLike,
     view: View,
@@ -69,37 +162,29 @@ def track_frame(
 
     The field is frozen; only the 7 pose parameters receive gradients.
     """
-    config = settings.tracking
-    quaternion, translation = quaternion_translation_from_pose(initial_pose.detach())
-    quaternion = quaternion.clone().requires_grad_(True)
-    translation = translation.clone().requires_grad_(True)
-    optimiser = torch.optim.Adam(
-        [
-            {"params": [translation], "lr": config.lr_translation},
-            {"params": [quaternion], "lr": config.lr_rotation},
-        ],
-        betas=config.adam_betas,
-    )
+    variables = PoseVariables.from_pose(initial_pose)
+    optimiser = pose_optimiser(variables, settings.tracking)
     best_pose = initial_pose.detach().clone()
-    best_loss = float("inf")
+    best_loss = torch.full((), float("inf"), device=best_pose.device)
     with frozen(field):  # type: ignore[arg-type]
-        for _ in range(config.iterations):
-            c2w = pose_from_quaternion_translation(quaternion, translation)
-            rays = sample_view_rays(view, c2w, config.rays, generator)
-            output = render_rays(field, rays, settings.render, perturb=True, generator=generator)
-            terms = compute_losses(
-                output,
-                rays,
-                config.weights,
-                field.truncation,
-                settings.loss,
-                outlier_factor=config.outlier_factor,
-            )
-            loss = float(terms.total.detach())
-            if loss < best_loss:
-                best_loss = loss
-                best_pose = c2w.detach().clone()
-            optimiser.zero_grad(set_to_none=True)
-            terms.total.backward()
-            optimiser.step()
+        for _ in range(settings.tracking.iterations):
+            loss, pose = tracking_step(field, view, variables, optimiser, settings, generator)
+            best_loss, best_pose = keep_best(best_loss, best_pose, loss, pose)
     return TrackingResult(pose=best_pose, loss=best_loss)
+
+
+@dataclass(frozen=True)
+class RenderTracker:
+    """The paper's tracker behind the :class:`~eslam.slam.trackers.Tracker` protocol."""
+
+    settings: TrackingSettings
+
+    def track(
+        self,
+        field: SceneFieldLike,
+        view: View,
+        initial_pose: torch.Tensor,
+        generator: torch.Generator,
+    ) -> TrackingResult:
+        """Pose of ``view`` from ``initial_pose`` by :func:`track_frame`."""
+        return track_frame(field, view, initial_pose, self.settings, generator)

@@ -12,7 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from eslam.config import load_config
+from eslam.config import ESLAMConfig, load_config
 from eslam.data.synthetic import SynthConfig, read_synthetic_bound, write_synthetic_sequence
 from eslam.slam.loop import run_slam
 from eslam.workflows.evaluate_run import EvaluationOptions, evaluate_run
@@ -40,17 +40,20 @@ class DemoResult:
     metrics: dict
 
 
-def run_demo(out_dir: str | Path, overrides: tuple[str, ...] = ()) -> DemoResult:
-    """Write the demo scene to ``out_dir/data`` (once), run to ``out_dir/run``, evaluate."""
-    out_dir = Path(out_dir)
-    data = out_dir / "data"
+def demo_config(out_dir: str | Path, overrides: tuple[str, ...] = ()) -> ESLAMConfig:
+    """Write the demo scene to ``out_dir/data`` (once); return the demo's configuration."""
+    data = Path(out_dir) / "data"
     if not (data / "synth.json").is_file():
         write_synthetic_sequence(data, DEMO_SCENE, overwrite=True)
     bound = read_synthetic_bound(data)
-    config = load_config(
-        DEMO_CONFIG,
-        [f"data.path={data}", f"scene.bound={bound}", *overrides],
-    )
+    return load_config(DEMO_CONFIG, [f"data.path={data}", f"scene.bound={bound}", *overrides])
+
+
+def run_demo(out_dir: str | Path, config: ESLAMConfig | None = None) -> DemoResult:
+    """Run the demo (``config`` from :func:`demo_config`) to ``out_dir/run``, then evaluate."""
+    out_dir = Path(out_dir)
+    config = demo_config(out_dir) if config is None else config
+    data = out_dir / "data"
     result = run_slam(config, out_dir / "run", overwrite=True)
     options = EvaluationOptions(
         gt_mesh=data / "mesh.ply",

@@ -22,7 +22,7 @@ from tests.slam.test_loop import TINY as LOOP_TINY
 FRAMES = 6
 # tests/slam/test_loop.py's tiny settings; 30 tracking steps follow the true motion
 # (with 8 the estimate lags it by about half)
-TINY = [*LOOP_TINY, "tracking.iterations=30"]
+TINY = [*LOOP_TINY, "tracking.render.iterations=30"]
 
 
 def _bound_in_first_camera(corners_bound: list[list[float]], first: np.ndarray) -> list:

@@ -14,7 +14,7 @@ from eslam.data.synthetic import SynthConfig, read_synthetic_bound, write_synthe
 from eslam.errors import InputError
 from eslam.geometry.bounds import depth_points, fraction_outside
 from eslam.io.checkpoint import load_checkpoint
-from eslam.slam.bounds_policy import initial_bound
+from eslam.slam.bounds_policy import bound_from_frame, check_depth_found
 from eslam.slam.loop import run_slam
 from eslam.workflows.demo import DEMO_CONFIG
 from tests.slam.test_loop import TINY as LOOP_TINY
@@ -124,28 +124,14 @@ def test_growth_beyond_max_extent_is_refused_with_a_warning(sequence: Path, tmp_
     assert "would pass scene.max_extent=1.0 m" in log and "grown" not in log
 
 
-def test_initial_bound_without_depth_names_the_fix(sequence: Path, tmp_path: Path) -> None:
+def test_bound_from_the_first_frame_with_depth(sequence: Path, tmp_path: Path) -> None:
     frames = open_sequence(DataConfig(path=str(sequence)))
-
-    class NoDepth:
-        root = frames.root
-        intrinsics = frames.intrinsics
-
-        def __len__(self) -> int:
-            return len(frames)
-
-        def __getitem__(self, index: int):
-            frame = frames[index]
-            frame.depth[:] = 0.0
-            return frame
-
-        def gt_poses(self):
-            return frames.gt_poses()
-
     config = _config(sequence)
     with pytest.raises(InputError, match=r"first 30 frames has valid depth.*scene.bound"):
-        initial_bound(config.scene, NoDepth())
-    estimated = initial_bound(config.scene, frames)
+        check_depth_found(30, str(sequence))
+    check_depth_found(29, str(sequence))
+    pose = torch.from_numpy(frames.gt_poses()[0]).float()
+    estimated = bound_from_frame(config.scene, frames[0], pose)
     first = depth_points(
         torch.from_numpy(frames[0].depth).double(),
         frames.intrinsics,

@@ -101,9 +101,13 @@ def test_bad_input_leaves_an_earlier_run_untouched(
     err = capsys.readouterr().err.strip()
     assert "frame000002.jpg: unreadable colour image" in err
     # an unknown config key
-    code = main([*_args(sequence, out), "--overwrite", "tracking.iteration=3"])
+    code = main([*_args(sequence, out), "--overwrite", "tracking.render.iteration=3"])
     assert code == EXIT_USER_ERROR
-    assert "tracking.iterations" in capsys.readouterr().err  # the closest valid key
+    assert "tracking.render.iterations" in capsys.readouterr().err  # the closest valid key
+    # a key that moved names its new place
+    code = main([*_args(sequence, out), "--overwrite", "tracking.iterations=3"])
+    assert code == EXIT_USER_ERROR
+    assert "it moved: use 'tracking.render.iterations'" in capsys.readouterr().err
     # a device this machine does not have
     code = main([*_args(sequence, out), "--overwrite", "--device", "cuda:99"])
     assert code == EXIT_USER_ERROR

@@ -17,6 +17,7 @@ from eslam.slam.keyframes import (
     RandomWindow,
     make_window_strategy,
 )
+from eslam.slam.trajectory import Trajectory
 from eslam.types import Frame, Intrinsics
 
 CAMERA = Intrinsics(width=32, height=24, fx=20.0, fy=20.0, cx=15.5, cy=11.5)
@@ -35,6 +36,19 @@ def _plane(metres: float) -> np.ndarray:
     return np.full((CAMERA.height, CAMERA.width), metres, dtype=np.float32)
 
 
+def _store(device: str = "cpu", capacity: int = 16) -> KeyframeStore:
+    return KeyframeStore(CAMERA, Trajectory(device), device, capacity)
+
+
+def _add(store: KeyframeStore, frame: Frame, pose) -> int:
+    """Give frame ``frame.index`` the ``pose`` in the store's trajectory, then store it."""
+    trajectory = store.trajectory
+    while len(trajectory) < frame.index:
+        trajectory.append(torch.eye(4), 0.0, None)
+    trajectory.append(torch.as_tensor(pose, dtype=torch.float32), 0.0, None)
+    return store.add(frame, frame.index)
+
+
 def _pose(rotation: np.ndarray | None = None, translation=(0.0, 0.0, 0.0)) -> torch.Tensor:
     pose = torch.eye(4)
     if rotation is not None:
@@ -45,12 +59,12 @@ def _pose(rotation: np.ndarray | None = None, translation=(0.0, 0.0, 0.0)) -> to
 
 @pytest.mark.parametrize("device", DEVICES)
 def test_store_round_trip_of_colour_and_depth(device: str) -> None:
-    store = KeyframeStore(CAMERA, device)
+    store = _store(device)
     frame = _frame(7)
     depth = frame.depth.copy()
     depth[0, :4] = [0.0, np.nan, -1.0, np.inf]
     frame = Frame(index=7, rgb=frame.rgb, depth=depth, intrinsics=CAMERA)
-    k = store.add(frame, _pose(translation=(1.0, 2.0, 3.0)))
+    k = _add(store, frame, _pose(translation=(1.0, 2.0, 3.0)))
     assert k == 0 and len(store) == 1 and store.frame_indices == (7,)
     rgb, metres = store.rgb(0), store.depth(0)
     assert rgb.dtype == torch.float32 and rgb.device.type == device and rgb.shape == (24, 32, 3)
@@ -66,10 +80,10 @@ def test_store_round_trip_of_colour_and_depth(device: str) -> None:
 
 
 def test_store_far_depth_is_invalid_and_counted() -> None:
-    store = KeyframeStore(CAMERA)
+    store = _store()
     depth = _plane(5.0)
     depth[0, :3] = [13.1, 13.2, 100.0]
-    store.add(_frame(0, depth=depth), torch.eye(4))
+    _add(store, _frame(0, depth=depth), torch.eye(4))
     metres = store.depth(0)
     assert float(metres[0, 0]) == pytest.approx(13.1, abs=1e-4)
     assert metres[0, 1] == 0 and metres[0, 2] == 0
@@ -77,10 +91,10 @@ def test_store_far_depth_is_invalid_and_counted() -> None:
 
 
 def test_store_grows_past_its_capacity() -> None:
-    store = KeyframeStore(CAMERA, "cpu", capacity=2)
+    store = _store("cpu", 2)
     frames = [_frame(4 * i, seed=1) for i in range(9)]
     for i, frame in enumerate(frames):
-        assert store.add(frame, _pose(translation=(float(i), 0.0, 0.0))) == i
+        assert _add(store, frame, _pose(translation=(float(i), 0.0, 0.0))) == i
     assert len(store) == 9 and store.capacity >= 9 and store.capacity <= 16
     assert store.frame_indices == tuple(range(0, 36, 4))
     assert store.poses.shape == (9, 4, 4)
@@ -92,42 +106,41 @@ def test_store_grows_past_its_capacity() -> None:
         assert torch.allclose(store.depth(i), torch.from_numpy(frame.depth), atol=1.01e-4, rtol=0)
 
 
-def test_store_set_pose_and_checks() -> None:
-    store = KeyframeStore(CAMERA)
-    store.add(_frame(0), np.eye(4))
-    store.add(_frame(1), torch.eye(4, dtype=torch.float64))
-    store.set_pose(1, _pose(translation=(0.0, 0.5, 0.0)))
+def test_store_poses_come_from_the_trajectory_and_checks() -> None:
+    store = _store()
+    _add(store, _frame(0), np.eye(4))
+    _add(store, _frame(1), torch.eye(4, dtype=torch.float64))
+    store.trajectory.set_poses([1], _pose(translation=(0.0, 0.5, 0.0))[None])
     assert store.poses.dtype == torch.float32 and float(store.poses[1, 1, 3]) == 0.5
     with pytest.raises(IndexError):
-        store.set_pose(2, torch.eye(4))
-    with pytest.raises(IndexError):
         store.depth(-1)
-    with pytest.raises(ValueError, match="finite"):
-        store.set_pose(0, torch.full((4, 4), float("nan")))
-    with pytest.raises(ValueError, match="finite"):
-        store.add(_frame(2), torch.eye(3))
+    with pytest.raises(ValueError, match="no finite pose"):
+        store.add(_frame(2), 2)  # the trajectory has no frame 2
+    store.trajectory.append(torch.full((4, 4), float("nan")), 0.0, None)
+    with pytest.raises(ValueError, match="no finite pose"):
+        store.add(_frame(2), 2)
     small = Intrinsics(width=8, height=6, fx=5.0, fy=5.0, cx=3.5, cy=2.5)
     with pytest.raises(ValueError, match="keyframes are 32x24"):
-        store.add(
-            Frame(3, np.zeros((6, 8, 3), np.uint8), np.ones((6, 8), np.float32), small),
-            torch.eye(4),
-        )
+        store.add(Frame(3, np.zeros((6, 8, 3), np.uint8), np.ones((6, 8), np.float32), small), 0)
     assert len(store) == 2
+    store.truncate(1)
+    assert len(store) == 1 and store.frame_indices == (0,)
 
 
 def test_store_state_round_trip_through_a_checkpoint(tmp_path: Path) -> None:
-    store = KeyframeStore(CAMERA, "cpu", capacity=8)
+    store = _store("cpu", 8)
     depth = _plane(2.0)
     depth[0, 0] = 20.0
     for i in range(3):
-        store.add(
+        _add(store, 
             _frame(i * 4, seed=2, depth=depth if i == 1 else None), _pose(translation=(i, 0, 0))
         )
     state = store.state_dict()
     assert state["rgb"].shape == (3, 24, 32, 3)
     assert state["rgb"].untyped_storage().nbytes() == 3 * 24 * 32 * 3  # compact, not capacity
     save_checkpoint(tmp_path / "map.pt", {"keyframes": state})
-    loaded = KeyframeStore.from_state_dict(load_checkpoint(tmp_path / "map.pt")["keyframes"], "cpu")
+    saved = load_checkpoint(tmp_path / "map.pt")["keyframes"]
+    loaded = KeyframeStore.from_state_dict(saved, store.trajectory, "cpu")
     assert len(loaded) == 3 and loaded.intrinsics == CAMERA and loaded.device == torch.device("cpu")
     assert loaded.frame_indices == (0, 4, 8) and loaded.far_depth_pixels == 1
     assert torch.equal(loaded.poses, store.poses)
@@ -135,31 +148,34 @@ def test_store_state_round_trip_through_a_checkpoint(tmp_path: Path) -> None:
         assert torch.equal(loaded.rgb(k), store.rgb(k)) and torch.equal(
             loaded.depth(k), store.depth(k)
         )
-    loaded.add(_frame(12), torch.eye(4))
+    _add(loaded, _frame(12), torch.eye(4))
     assert len(loaded) == 4 and len(store) == 3
 
 
 def test_store_state_with_wrong_shapes_is_refused() -> None:
-    store = KeyframeStore(CAMERA)
-    store.add(_frame(0), torch.eye(4))
+    store = _store()
+    _add(store, _frame(0), torch.eye(4))
     state = store.state_dict()
-    state["poses"] = torch.zeros(2, 4, 4)
-    with pytest.raises(ValueError, match="poses has shape"):
-        KeyframeStore.from_state_dict(state)
+    state["rgb"] = torch.zeros(2, 24, 32, 3, dtype=torch.uint8)
+    with pytest.raises(ValueError, match="rgb has shape"):
+        KeyframeStore.from_state_dict(state, store.trajectory)
+    state = store.state_dict()
+    with pytest.raises(ValueError, match="outside the trajectory"):
+        KeyframeStore.from_state_dict(state, Trajectory())
     del state["rgb"]
     with pytest.raises(KeyError):
-        KeyframeStore.from_state_dict(state)
+        KeyframeStore.from_state_dict(state, store.trajectory)
 
 
 def test_empty_store_state_round_trip() -> None:
-    loaded = KeyframeStore.from_state_dict(KeyframeStore(CAMERA).state_dict())
+    loaded = KeyframeStore.from_state_dict(_store().state_dict(), Trajectory())
     assert len(loaded) == 0 and loaded.poses.shape == (0, 4, 4)
 
 
 def _store_of(count: int) -> KeyframeStore:
-    store = KeyframeStore(CAMERA, capacity=count)
+    store = _store(capacity=count)
     for i in range(count):
-        store.add(_frame(i, depth=_plane(2.0)), torch.eye(4))
+        _add(store, _frame(i, depth=_plane(2.0)), torch.eye(4))
     return store
 
 
@@ -209,9 +225,9 @@ def _overlap_store() -> KeyframeStore:
         _pose(opposite, (0.0, 0.0, 5.0)),
         _pose(),
     ]
-    store = KeyframeStore(CAMERA)
+    store = _store()
     for i, pose in enumerate(poses):
-        store.add(_frame(i, depth=_plane(2.0)), pose)
+        _add(store, _frame(i, depth=_plane(2.0)), pose)
     return store
 
 
@@ -240,7 +256,7 @@ def test_overlap_window_excludes_keyframes_that_do_not_overlap() -> None:
 
 def test_overlap_window_without_depth_draws_from_all() -> None:
     store = _overlap_store()
-    store.add(_frame(7, depth=_plane(0.0)), torch.eye(4))
+    _add(store, _frame(7, depth=_plane(0.0)), torch.eye(4))
     window = OverlapWindow(size=10)
     assert window.overlap_fractions(store, 7, [0, 1]) is None
     assert window.select(store, 7, torch.Generator().manual_seed(0)) == list(range(8))

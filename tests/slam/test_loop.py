@@ -18,9 +18,9 @@ from eslam.workflows.demo import DEMO_CONFIG
 FRAMES = 12
 # Small enough for CI (2 cores): coarser planes, few rays and iterations.
 TINY = [
-    "tracking.rays=200",
+    "tracking.render.rays=200",
     "tracking.border=4",
-    "tracking.iterations=8",
+    "tracking.render.iterations=8",
     "mapping.rays=400",
     "mapping.every=3",
     "mapping.window=4",
@@ -78,7 +78,7 @@ def test_run_writes_every_output(full_run) -> None:
     assert len(timestamps) == FRAMES
     np.testing.assert_allclose(poses, full_run.poses, atol=1e-6)
     saved = load_config(root / "config.yaml")
-    assert saved.tracking.rays == 200 and saved.scene.bound is not None
+    assert saved.tracking.render.rays == 200 and saved.scene.bound is not None
 
 
 def test_run_tracks_the_synthetic_camera(full_run) -> None:

@@ -18,9 +18,9 @@ from eslam.workflows.demo import DEMO_CONFIG
 
 # A few frames, coarse planes and few iterations: a real run folder in seconds.
 TINY = [
-    "tracking.rays=100",
+    "tracking.render.rays=100",
     "tracking.border=4",
-    "tracking.iterations=2",
+    "tracking.render.iterations=2",
     "mapping.rays=300",
     "mapping.every=2",
     "mapping.window=3",

@@ -1,0 +1,105 @@
+"""The run writer: the run folder's files, as a run observer.
+
+Every ``output.checkpoint_every`` frames, on a failure and at the end it writes map.pt
+(everything needed to resume), trajectory.txt / trajectory_gt.txt (the frames so far)
+and timings.json; at the end also metrics.json and, when the stream ended, mesh.ply.
+Every file is written atomically, so a crash leaves the last complete version.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from eslam.config import ESLAMConfig
+from eslam.evaluate.trajectory import absolute_trajectory_error
+from eslam.io.run_dir import RunDirectory, write_json
+from eslam.io.trajectory import write_tum_trajectory
+from eslam.slam.observers import FrameDone, RunEnd, RunObserverBase, RunStart
+from eslam.slam.progress import finite_ate_pairs
+from eslam.slam.resources import PeakMemory
+from eslam.slam.state import SLAMState, save_state
+
+
+def run_metrics(state: SLAMState, device: str, peak_memory_mb: float) -> dict:
+    """metrics.json of a run: frames, device, FPT, peak memory and, with ground truth, ATE.
+
+    FPT (seconds per frame) = (sum of tracking and mapping times) / frames. The ATE
+    (rigid alignment, cm) uses the frames whose estimate and ground truth are both finite.
+    """
+    done = state.next_frame
+    metrics: dict = {
+        "frames": done,
+        "device": device,
+        "fpt_s": float(np.sum(state.tracking_time) + np.sum(state.mapping_time)) / max(done, 1),
+        "peak_memory_mb": peak_memory_mb,
+    }
+    gt = state.trajectory.gt_poses()
+    if gt is not None:
+        poses = state.trajectory.poses.detach().cpu().double().numpy()
+        usable = finite_ate_pairs(poses, gt)
+        if usable.sum() >= 3:
+            metrics.update(absolute_trajectory_error(poses[usable], gt[usable]).as_cm())
+            metrics["ate_frames"] = int(usable.sum())
+    return metrics
+
+
+class RunWriter(RunObserverBase):
+    """Writes the run folder ``run`` as the run goes (module doc).
+
+    Attributes:
+        metrics: metrics.json's contents once the run finished (None before).
+    """
+
+    def __init__(self, run: RunDirectory, config: ESLAMConfig, memory: PeakMemory) -> None:
+        self.run = run
+        self.config = config
+        self.memory = memory
+        self.state: SLAMState | None = None
+        self.metrics: dict | None = None
+
+    def on_start(self, start: RunStart) -> None:
+        self.state = start.state
+
+    def on_frame(self, frame: FrameDone) -> None:
+        if (frame.index + 1) % self.config.output.checkpoint_every == 0:
+            self.checkpoint()
+
+    def on_finish(self, end: RunEnd) -> None:
+        state = self._state()
+        self.checkpoint()
+        if end.complete and self.config.output.mesh and state.field is not None:
+            from eslam.data.mesh_io import write_mesh_ply
+            from eslam.mesh.extract import extract_mesh
+
+            mesh = extract_mesh(
+                state.field, self.config.output.mesh_resolution, state.observed_views()
+            )
+            write_mesh_ply(self.run.mesh, mesh)
+        self.metrics = run_metrics(state, str(self.memory.device), self.memory.peak_mb())
+        write_json(self.run.metrics, self.metrics)
+
+    def on_failure(self, error: BaseException, frames: int) -> None:
+        if self.state is not None and frames > 0:
+            self.checkpoint()
+
+    def _state(self) -> SLAMState:
+        if self.state is None:
+            raise RuntimeError("the run writer was not started")
+        return self.state
+
+    def checkpoint(self) -> None:
+        """map.pt, the trajectory so far and timings.json (atomically, in that order)."""
+        state = self._state()
+        save_state(self.run.map, state)
+        trajectory = state.trajectory
+        timestamps = trajectory.timestamps()
+        poses = trajectory.poses.detach().cpu().double().numpy()
+        write_tum_trajectory(self.run.trajectory, timestamps, poses)
+        gt = trajectory.gt_poses()
+        if gt is not None:
+            usable = finite_ate_pairs(poses, gt)
+            write_tum_trajectory(self.run.trajectory_gt, timestamps[usable], gt[usable])
+        write_json(
+            self.run.timings,
+            {"tracking_s": list(state.tracking_time), "mapping_s": list(state.mapping_time)},
+        )

@@ -1,0 +1,68 @@
+"""The tracker seam: the protocol every tracker implements, the registry behind
+``tracking.method``, and the motion model that gives each frame its starting pose.
+
+A new tracker is a module with a class that has ``track(field, view, initial_pose,
+generator)``, plus one entry in :data:`TRACKERS` (and its name in the config's
+``tracking.method``); the run loop does not change.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Protocol
+
+import torch
+
+from eslam.config import ESLAMConfig
+from eslam.errors import ConfigError
+from eslam.geometry.pose import extrapolate_constant_velocity
+from eslam.render.renderer import SceneFieldLike
+from eslam.slam.tracking import RenderTracker, TrackingResult, TrackingSettings
+from eslam.slam.views import View
+
+
+class Tracker(Protocol):
+    """Estimates one frame's camera-to-world pose against the frozen map."""
+
+    def track(
+        self,
+        field: SceneFieldLike,
+        view: View,
+        initial_pose: torch.Tensor,
+        generator: torch.Generator,
+    ) -> TrackingResult:
+        """Pose of ``view`` (the frame's images on the device), starting at ``initial_pose``."""
+        ...
+
+
+def _render_tracker(config: ESLAMConfig) -> Tracker:
+    return RenderTracker(TrackingSettings(config.tracking.render, config.render, config.loss))
+
+
+TRACKERS: dict[str, Callable[[ESLAMConfig], Tracker]] = {"render": _render_tracker}
+"""Tracker factory of each ``tracking.method``."""
+
+
+def make_tracker(config: ESLAMConfig) -> Tracker:
+    """The tracker ``config.tracking.method`` names, built from its config section."""
+    try:
+        factory = TRACKERS[config.tracking.method]
+    except KeyError:
+        choices = ", ".join(sorted(TRACKERS))
+        raise ConfigError(
+            f"unknown tracking.method '{config.tracking.method}' (choose one of: {choices})"
+        ) from None
+    return factory(config)
+
+
+def predict_pose(poses: torch.Tensor, constant_velocity: bool) -> torch.Tensor:
+    """The motion model: the starting pose of the next frame from the (K, 4, 4) poses so far.
+
+    Constant velocity on SE(3) (:func:`~eslam.geometry.pose.extrapolate_constant_velocity`)
+    from the last two poses when ``constant_velocity`` and K >= 2, else the last pose.
+    """
+    if len(poses) == 0:
+        raise ValueError("the motion model needs at least one earlier pose")
+    if constant_velocity and len(poses) >= 2:
+        return extrapolate_constant_velocity(poses[-2], poses[-1])
+    return poses[-1]
