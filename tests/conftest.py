@@ -27,3 +27,79 @@ def real_data() -> Path:
     if not path.is_dir():
         pytest.fail(f"ESLAM_TEST_DATA={location} is not a folder")
     return path
+
+
+TINY = [
+    "tracking.render.rays=200",
+    "tracking.border=4",
+    "tracking.render.iterations=8",
+    "mapping.rays=400",
+    "mapping.every=3",
+    "mapping.window=4",
+    "mapping.iterations=6",
+    "mapping.first_iterations=60",
+    "render.samples_stratified=12",
+    "render.samples_surface=6",
+    "output.progress=false",
+    "output.checkpoint_every=4",
+    "output.mesh_resolution=0.1",
+    "field.geometry_resolution=[0.24, 0.12]",
+    "field.appearance_resolution=[0.24, 0.12]",
+]
+"""Settings small enough for CI (2 cores): coarser planes, few rays and iterations."""
+
+TINY_FRAMES = 12
+"""Frames of the shared tiny synthetic sequence (80x60, seed 3)."""
+
+
+@pytest.fixture(scope="session")
+def tiny_sequence(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The shared tiny synthetic sequence (Replica layout), written once per session."""
+    from eslam.data.synthetic import SynthConfig, write_synthetic_sequence
+
+    root = tmp_path_factory.mktemp("tiny") / "data"
+    write_synthetic_sequence(root, SynthConfig(frames=TINY_FRAMES, width=80, height=60, seed=3))
+    return root
+
+
+def tiny_config(sequence: Path, *extra: str):
+    """The demo config on ``sequence`` with its known bound and the TINY settings."""
+    from eslam.config import load_config
+    from eslam.data.synthetic import read_synthetic_bound
+    from eslam.workflows.demo import DEMO_CONFIG
+
+    bound = read_synthetic_bound(sequence)
+    return load_config(
+        DEMO_CONFIG, [f"data.path={sequence}", f"scene.bound={bound}", *TINY, *extra]
+    )
+
+
+@pytest.fixture(scope="session")
+def tiny_run(tiny_sequence: Path, tmp_path_factory: pytest.TempPathFactory):
+    """One uninterrupted run on the tiny sequence (the reference other tests compare to)."""
+    from eslam.slam.loop import run_slam
+
+    return run_slam(tiny_config(tiny_sequence), tmp_path_factory.mktemp("tiny_run") / "run")
+
+
+def static_ate_cm(gt_poses) -> float:
+    """ATE RMSE (cm) of a tracker that never moves: every pose = the first ground truth.
+
+    Loop tests compare against it (a run must do much better), so a dead tracker fails.
+    """
+    import numpy as np
+
+    from eslam.evaluate.trajectory import absolute_trajectory_error
+
+    gt = np.asarray(gt_poses, dtype=np.float64)
+    static = np.repeat(gt[:1], len(gt), axis=0)
+    return 100.0 * absolute_trajectory_error(static, gt).rmse
+
+
+@pytest.fixture(scope="session")
+def tiny_static_ate_cm(tiny_sequence: Path) -> float:
+    """:func:`static_ate_cm` of the tiny sequence (about 2.5 cm)."""
+    from eslam.config import DataConfig
+    from eslam.data import open_sequence
+
+    return static_ate_cm(open_sequence(DataConfig(path=str(tiny_sequence))).gt_poses())

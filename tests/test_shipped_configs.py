@@ -38,7 +38,10 @@ def test_scannet_scenes(scene: str) -> None:
     config = load_config(CONFIGS / "scannet" / f"scene{scene}.yaml")
     assert config.data.format == "scannet" and config.scene.bound is not None
     assert (config.tracking.render.iterations, config.mapping.iterations) == (30, 30)
-    assert (config.tracking.render.lr_translation, config.tracking.render.lr_rotation) == (0.0005, 0.0025)
+    assert (config.tracking.render.lr_translation, config.tracking.render.lr_rotation) == (
+        0.0005,
+        0.0025,
+    )
     assert config.output.mesh_resolution == 0.02
 
 

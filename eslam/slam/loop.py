@@ -34,6 +34,7 @@ from eslam.config.device import resolve_device
 from eslam.data import RGBDSequence, open_sequence
 from eslam.data.source import FrameSource, SequenceSource, source_length
 from eslam.errors import ConfigError, ESLAMError, InputError, RunInterrupted, RunStopped
+from eslam.field.scene_field import SceneField
 from eslam.io.run_dir import RunDirectory, prepare_run_directory
 from eslam.render.rays import camera_directions
 from eslam.slam.bounds_policy import (
@@ -57,6 +58,7 @@ from eslam.slam.progress import ProgressObserver, finite_ate_pairs
 from eslam.slam.resources import PeakMemory, device_clock
 from eslam.slam.run_writer import RunWriter
 from eslam.slam.state import (
+    FrameMark,
     SLAMState,
     initial_state,
     load_state,
@@ -116,7 +118,7 @@ class RunLoop:
         self.directions = camera_directions(state.keyframes.intrinsics, device)
         self.last_frame: Frame | None = None
         self._frames_without_depth = 0
-        self._field_before: dict[str, torch.Tensor] | None = None
+        self._before_mapping: tuple[dict[str, torch.Tensor], torch.Tensor] | None = None
 
     def run(self, frames: Iterable[Frame], total: int | None, stop_after: int | None) -> RunEnd:
         """Process ``frames`` (``total`` of them in the whole run, None if unknown) until
@@ -133,18 +135,19 @@ class RunLoop:
                 complete = total is not None and state.next_frame >= total
                 break
             mark = state.mark()
-            self._field_before = None
+            self._before_mapping = None
             try:
                 frame = next(iterator, None)
                 if frame is None:
                     break
-                self.process(frame)
+                done = self.process(frame)
             except BaseException:
                 self._rollback(mark)
                 raise
+            self.observers.on_frame(done)  # the frame is complete: never rolled back
         if complete:
             mark = state.mark()
-            self._field_before = None
+            self._before_mapping = None
             try:
                 self.map_last_frame()
             except BaseException:
@@ -154,17 +157,18 @@ class RunLoop:
             complete=complete, frames=state.next_frame, wall_s=time.perf_counter() - began
         )
 
-    def _rollback(self, mark) -> None:
+    def _rollback(self, mark: FrameMark) -> None:
+        """Undo the frame begun at ``mark``, including a mapping call's changes to the
+        field and to earlier keyframes' poses."""
         field_before = None
-        if self._field_before is not None and self.state.field is not None:
-            from eslam.field.scene_field import SceneField
-
-            field_before = SceneField.from_state(self.config.field, self._field_before)
-            field_before = field_before.to(self.device)
+        if self._before_mapping is not None:
+            field_state, poses = self._before_mapping
+            field_before = SceneField.from_state(self.config.field, field_state).to(self.device)
+            self.state.trajectory.set_poses(list(range(len(poses))), poses)
         self.state.rollback(mark, field_before)
 
-    def process(self, frame: Frame) -> None:
-        """Track ``frame``, map it if it is a keyframe, tell the observers."""
+    def process(self, frame: Frame) -> FrameDone:
+        """Track ``frame``, map it if it is a keyframe; return what happened."""
         state = self.state
         index = state.next_frame
         started = device_clock(self.device)
@@ -200,15 +204,13 @@ class RunLoop:
         state.tracking_time.append(done_tracking - started)
         state.mapping_time.append(done - done_tracking)
         self.last_frame = frame
-        self.observers.on_frame(
-            FrameDone(
-                index=index,
-                pose=state.trajectory.poses[index],
-                tracked=tracked,
-                mapped=mapped,
-                tracking_s=done_tracking - started,
-                mapping_s=done - done_tracking,
-            )
+        return FrameDone(
+            index=index,
+            pose=state.trajectory.poses[index],
+            tracked=tracked,
+            mapped=mapped,
+            tracking_s=done_tracking - started,
+            mapping_s=done - done_tracking,
         )
 
     def _create_field(self, frame: Frame, has_depth: bool, pose: torch.Tensor) -> None:
@@ -227,7 +229,10 @@ class RunLoop:
         field = state.field
         if field is None:
             raise RuntimeError("mapping before the field exists")
-        self._field_before = {k: v.detach().clone() for k, v in field.state_dict().items()}
+        self._before_mapping = (
+            {k: v.detach().clone() for k, v in field.state_dict().items()},
+            state.trajectory.poses.clone(),
+        )
         store = state.keyframes
         current = store.add(frame, index)
         pose = state.trajectory.poses[index]

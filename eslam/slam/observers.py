@@ -25,6 +25,7 @@ from eslam.config import ESLAMConfig
 if TYPE_CHECKING:
     from eslam.slam.state import SLAMState
 
+
 @dataclass(frozen=True, eq=False)
 class RunStart:
     """A run begins (or resumes).

@@ -111,13 +111,6 @@ class FrameMark:
     last_mapped: bool
 
 
-def copy_field(field: SceneField) -> SceneField:
-    """An independent copy of ``field`` on its device (to restore after a failed frame)."""
-    device = field.bound.device
-    state = {k: v.detach().clone() for k, v in field.state_dict().items()}
-    return SceneField.from_state(field.config, state).to(device)
-
-
 def run_generator(config: ESLAMConfig, device: torch.device) -> torch.Generator:
     """The run's random generator on ``device``, seeded with ``config.seed``."""
     generator = torch.Generator(device=device)

@@ -17,7 +17,7 @@ from eslam.io.trajectory import read_tum_trajectory
 from eslam.slam.loop import run_slam
 from eslam.types import Frame
 from eslam.workflows.demo import DEMO_CONFIG
-from tests.slam.test_loop import TINY as LOOP_TINY
+from tests.conftest import TINY as LOOP_TINY
 
 FRAMES = 6
 # tests/slam/test_loop.py's tiny settings; 30 tracking steps follow the true motion

@@ -24,7 +24,7 @@ from eslam.data.synthetic import (
 from eslam.io.trajectory import read_tum_trajectory
 from eslam.slam.loop import run_slam
 from eslam.workflows.demo import DEMO_CONFIG
-from tests.slam.test_loop import TINY
+from tests.conftest import TINY, static_ate_cm
 
 SCENE = SynthConfig(frames=9, width=80, height=60, seed=3)
 
@@ -70,7 +70,8 @@ def test_frames_without_depth_are_skipped_with_a_warning(tmp_path: Path) -> None
     assert "frame 4 (timestamp 4.000000) has no valid depth: skipped" in log
     assert "mapped frame 1: window [0]" in log  # the first map moved to the first frame with depth
     assert np.isfinite(result.poses).all()
-    assert result.metrics["ate_rmse_cm"] < 3.0
+    # a tracker that never moves scores static_ate_cm; frames 0 and 4 keep predicted poses
+    assert result.metrics["ate_rmse_cm"] < 0.3 * static_ate_cm([f.pose_gt for f in frames])
 
 
 def _scene_bound(scene: SynthConfig) -> str:

@@ -132,8 +132,10 @@ def test_store_state_round_trip_through_a_checkpoint(tmp_path: Path) -> None:
     depth = _plane(2.0)
     depth[0, 0] = 20.0
     for i in range(3):
-        _add(store, 
-            _frame(i * 4, seed=2, depth=depth if i == 1 else None), _pose(translation=(i, 0, 0))
+        _add(
+            store,
+            _frame(i * 4, seed=2, depth=depth if i == 1 else None),
+            _pose(translation=(i, 0, 0)),
         )
     state = store.state_dict()
     assert state["rgb"].shape == (3, 24, 32, 3)

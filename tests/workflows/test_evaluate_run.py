@@ -14,7 +14,7 @@ from eslam.data.synthetic import SynthConfig, read_synthetic_bound, write_synthe
 from eslam.slam.loop import run_slam
 from eslam.slam.remesh import remesh_run
 from eslam.workflows.demo import DEMO_CONFIG
-from tests.slam.test_loop import TINY
+from tests.conftest import TINY
 
 ALL_KEYS = {
     "ate_rmse_cm",

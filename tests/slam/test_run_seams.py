@@ -1,0 +1,165 @@
+"""The run loop's seams: frame sources of unknown length, observers, failures that keep
+every completed frame (and resume exactly), and runs that leave no process-wide trace."""
+
+from __future__ import annotations
+
+import json
+import logging
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from eslam.cli import EXIT_USER_ERROR, main
+from eslam.config import DataConfig, load_config
+from eslam.data import open_sequence
+from eslam.data.source import IterableSource
+from eslam.errors import RunInterrupted, RunStopped
+from eslam.io.checkpoint import load_checkpoint
+from eslam.io.trajectory import read_tum_trajectory
+from eslam.slam.loop import run_slam
+from eslam.slam.observers import FrameDone, MappingDone, RunEnd, RunObserverBase, RunStart
+from eslam.workflows.demo import DEMO_CONFIG
+from tests.conftest import TINY, TINY_FRAMES, tiny_config
+
+
+def _frames(sequence: Path):
+    """A generator over the sequence's frames: no length, no indexing."""
+    frames = open_sequence(DataConfig(path=str(sequence)))
+    return frames.intrinsics, (frames[i] for i in range(len(frames)))
+
+
+class Recorder(RunObserverBase):
+    """Remembers every event; optionally raises at one of them."""
+
+    def __init__(self, interrupt_at_mapping: int | None = None) -> None:
+        self.events: list[str] = []
+        self.interrupt_at_mapping = interrupt_at_mapping
+
+    def on_start(self, start: RunStart) -> None:
+        self.events.append(f"start {start.frames}")
+
+    def on_frame(self, frame: FrameDone) -> None:
+        self.events.append(f"frame {frame.index} {'M' if frame.mapped else '-'}")
+
+    def on_mapping(self, mapping: MappingDone) -> None:
+        self.events.append(f"map {mapping.index}")
+        if mapping.index == self.interrupt_at_mapping:
+            raise KeyboardInterrupt
+
+    def on_finish(self, end: RunEnd) -> None:
+        self.events.append(f"finish {end.complete} {end.frames}")
+
+    def on_failure(self, error: BaseException, frames: int) -> None:
+        self.events.append(f"failure {type(error).__name__} {frames}")
+
+
+def test_a_generator_of_unknown_length_gives_the_disk_trajectory(
+    tiny_sequence: Path, tiny_run, tmp_path: Path
+) -> None:
+    intrinsics, frames = _frames(tiny_sequence)
+    recorder = Recorder()
+    result = run_slam(
+        tiny_config(tiny_sequence),
+        tmp_path / "stream",
+        source=IterableSource(intrinsics, frames, name="generator"),
+        observers=[recorder],
+    )
+    np.testing.assert_allclose(result.poses, tiny_run.poses, rtol=0, atol=0)
+    assert result.metrics["ate_rmse_cm"] == tiny_run.metrics["ate_rmse_cm"]
+    assert (tmp_path / "stream" / "mesh.ply").is_file()
+    # every 3rd frame is mapped as it arrives; the last one (11) when the stream ends
+    assert recorder.events[0] == "start None"
+    assert recorder.events[1:3] == ["map 0", "frame 0 M"]
+    assert recorder.events[-3:] == ["frame 11 -", "map 11", f"finish True {TINY_FRAMES}"]
+    assert (
+        "run on generator: unknown number of frames"
+        in (tmp_path / "stream" / "log.txt").read_text()
+    )
+
+
+def test_a_stream_without_depth_and_bound_is_refused(tiny_sequence: Path, tmp_path: Path) -> None:
+    intrinsics, frames = _frames(tiny_sequence)
+    blank = (f for f in frames for _ in range(3))  # 36 frames ...
+    empty = (type(f)(f.index, f.rgb, np.zeros_like(f.depth), f.intrinsics) for f in blank)
+    config = load_config(DEMO_CONFIG, [*TINY, "output.mesh=false"])  # no scene.bound
+    with pytest.raises(RunStopped, match="first 30 frames has valid depth.*stopped after 29"):
+        run_slam(config, tmp_path / "r", source=IterableSource(intrinsics, empty))
+
+
+def test_a_corrupt_depth_image_stops_the_run_and_resume_finishes_it(
+    tiny_sequence: Path, tiny_run, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    data = tmp_path / "data"
+    shutil.copytree(tiny_sequence, data)
+    broken = data / "results" / "depth000006.png"
+    good = broken.read_bytes()
+    broken.write_bytes(b"not a png")
+    out = tmp_path / "run"
+    args = ["run", str(DEMO_CONFIG), "--data", str(data), "--out", str(out)]
+    bound = load_config(tiny_run.run_dir / "config.yaml").scene.bound
+    code = main([*args, f"scene.bound={bound}", *TINY])
+    assert code == EXIT_USER_ERROR
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "depth000006.png: unreadable depth image" in err
+    assert f"stopped after 6 frames, saved in {out}" in err and f"eslam resume {out}" in err
+    saved = load_checkpoint(out / "map.pt")
+    assert len(saved["trajectory"]["timestamps"]) == 6  # frames 0..5
+    _, poses = read_tum_trajectory(out / "trajectory.txt")
+    assert len(poses) == 6
+    assert "run stopped after 6 completed frames" in (out / "log.txt").read_text()
+
+    broken.write_bytes(good)
+    assert main(["resume", str(out)]) == 0
+    resumed = load_checkpoint(out / "map.pt")["trajectory"]["poses"].double().numpy()
+    np.testing.assert_allclose(resumed, tiny_run.poses, rtol=0, atol=1e-7)
+    assert json.loads((out / "metrics.json").read_text())["frames"] == TINY_FRAMES
+
+
+def test_an_interruption_during_mapping_is_rolled_back_and_resumes_exactly(
+    tiny_sequence: Path, tiny_run, tmp_path: Path
+) -> None:
+    # frame 6 is mapped (every 3rd), then interrupted: the mapped field, the keyframe,
+    # the pose and the generator draws of frame 6 are undone, frames 0..5 are saved
+    recorder = Recorder(interrupt_at_mapping=6)
+    out = tmp_path / "run"
+    with pytest.raises(RunInterrupted, match=f"interrupted after 6 frames, saved in {out}"):
+        run_slam(tiny_config(tiny_sequence), out, observers=[recorder])
+    assert recorder.events[-2:] == ["map 6", "failure KeyboardInterrupt 6"]
+    resumed = run_slam(load_config(out / "config.yaml"), out, resume=True)
+    np.testing.assert_allclose(resumed.poses, tiny_run.poses, rtol=0, atol=1e-7)
+
+
+def test_a_run_leaves_no_process_wide_state(tiny_sequence: Path, tmp_path: Path) -> None:
+    threads = torch.get_num_threads()
+    level = logging.getLogger("eslam").level
+    handlers = list(logging.getLogger("eslam").handlers)
+    rng = torch.get_rng_state()
+    config = tiny_config(tiny_sequence, "threads=1", "output.mesh=false", "seed=1")
+    run_slam(tiny_config(tiny_sequence, "output.mesh=false"), tmp_path / "a")
+    second = run_slam(config, tmp_path / "b")
+    assert torch.get_num_threads() == threads
+    assert logging.getLogger("eslam").level == level
+    assert logging.getLogger("eslam").handlers == handlers
+    assert torch.equal(torch.get_rng_state(), rng)
+    # the second run of this process equals the same run alone in a fresh process
+    script = (
+        "import sys, numpy as np\n"
+        "from eslam.config import load_config\n"
+        "from eslam.slam.loop import run_slam\n"
+        "r = run_slam(load_config(sys.argv[1]), sys.argv[2])\n"
+        "np.save(sys.argv[3], r.poses)\n"
+    )
+    alone = tmp_path / "alone.npy"
+    subprocess.run(
+        [sys.executable, "-c", script, str(tmp_path / "b" / "config.yaml"), str(tmp_path / "c"),
+         str(alone)],
+        check=True,
+        cwd=Path(__file__).resolve().parents[2],
+    )  # fmt: skip
+    np.testing.assert_array_equal(second.poses, np.load(alone))
+    assert second.metrics["peak_memory_mb"] > 0
