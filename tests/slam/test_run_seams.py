@@ -87,7 +87,7 @@ def test_a_stream_without_depth_and_bound_is_refused(tiny_sequence: Path, tmp_pa
     blank = (f for f in frames for _ in range(3))  # 36 frames ...
     empty = (type(f)(f.index, f.rgb, np.zeros_like(f.depth), f.intrinsics) for f in blank)
     config = load_config(DEMO_CONFIG, [*TINY, "output.mesh=false"])  # no scene.bound
-    with pytest.raises(RunStopped, match="first 30 frames has valid depth.*stopped after 29"):
+    with pytest.raises(RunStopped, match=r"first 30 frames has valid depth.*stopped after 29"):
         run_slam(config, tmp_path / "r", source=IterableSource(intrinsics, empty))
 
 
