@@ -92,6 +92,7 @@ def render_rays(
     generator: torch.Generator | None = None,
     *,
     check: bool = True,
+    noise: tuple[torch.Tensor, torch.Tensor] | None = None,
 ) -> RenderOutput:
     """Render rays with a measured depth D: ESLAM's depth-guided sampling and compositing.
 
@@ -106,6 +107,8 @@ def render_rays(
         generator: randomness of the jitter.
         check: verify that every ray has a depth (a host sync). The optimisation steps
             pass False: they draw rays only through pixels with depth, and must not sync.
+        noise: the jitter drawn ahead (:func:`~eslam.render.sampling.draw_depth_guided_noise`)
+            instead of drawing it from ``generator`` here.
 
     Raises:
         ValueError: when ``check`` and a ray has no valid depth.
@@ -124,6 +127,7 @@ def render_rays(
         far_factor=config.far_factor,
         perturb=perturb,
         generator=generator,
+        noise=noise,
     )
     return _integrate(field, rays.origins, rays.directions, z, config)
 

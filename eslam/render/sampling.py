@@ -23,7 +23,12 @@ def _unit_rand(
 
 
 def stratified_offsets(
-    count: int, n: int, perturb: bool, generator: torch.Generator | None, like: torch.Tensor
+    count: int,
+    n: int,
+    perturb: bool,
+    generator: torch.Generator | None,
+    like: torch.Tensor,
+    noise: torch.Tensor | None = None,
 ) -> torch.Tensor:
     """Fractions t in [0, 1] of ``n`` samples per ray, evenly spaced or jittered in their bins.
 
@@ -35,6 +40,8 @@ def stratified_offsets(
     Args:
         count: number of rays N.
         like: a tensor whose device and dtype the result takes.
+        noise: (N, n) uniforms in [0, 1) to jitter with instead of drawing them from
+            ``generator`` (drawn ahead, so the caller's computation is free of RNG state).
 
     Returns:
         (N, n) fractions, sorted along the last axis.
@@ -54,7 +61,9 @@ def stratified_offsets(
         upper = torch.cat((mids, t[:, -1:]), dim=1)
     if not perturb:
         return t.contiguous()
-    return lower + (upper - lower) * _unit_rand((count, n), like, generator)
+    if noise is None:
+        noise = _unit_rand((count, n), like, generator)
+    return lower + (upper - lower) * noise
 
 
 def uniform_samples(
@@ -63,10 +72,12 @@ def uniform_samples(
     n: int,
     perturb: bool,
     generator: torch.Generator | None = None,
+    noise: torch.Tensor | None = None,
 ) -> torch.Tensor:
     """``n`` samples per ray on [near, far]: z_k = near + t_k (far - near).
 
-    t_k from :func:`stratified_offsets` (evenly spaced, or jittered within bins).
+    t_k from :func:`stratified_offsets` (evenly spaced, or jittered within bins by
+    ``noise`` (N, n) when given, else by draws from ``generator``).
 
     Args:
         near: (N,) start of each interval.
@@ -78,7 +89,7 @@ def uniform_samples(
     Example:
         near = 0, far = 1, n = 5, perturb = False -> [0, 0.25, 0.5, 0.75, 1].
     """
-    t = stratified_offsets(near.shape[0], n, perturb, generator, near)
+    t = stratified_offsets(near.shape[0], n, perturb, generator, near, noise)
     return near[:, None] + t * (far - near)[:, None]
 
 
@@ -92,8 +103,9 @@ def depth_guided_samples(
     far_factor: float = 1.2,
     perturb: bool = False,
     generator: torch.Generator | None = None,
+    noise: tuple[torch.Tensor, torch.Tensor] | None = None,
 ) -> torch.Tensor:
-    """ESLAM's samples along rays with a measured depth D (method.md 2).
+    """ESLAM's samples along rays with a measured depth D (docs/method.md section 2).
 
     ``n_stratified`` samples on [0, far_factor D] and ``n_surface`` samples on
     [D - band T, D + band T] (release: far_factor 1.2, band 1.5), each set drawn by
@@ -107,6 +119,9 @@ def depth_guided_samples(
     Args:
         depth: (N,) measured depth along the optical axis, metres, > 0.
         truncation: T, metres.
+        noise: the jitter of the stratified (N, n_stratified) and surface (N, n_surface)
+            samples, drawn ahead (:func:`draw_depth_guided_noise`); None draws from
+            ``generator`` here, in the same order.
 
     Returns:
         (N, n_stratified + n_surface) sorted sample depths, metres.
@@ -117,13 +132,32 @@ def depth_guided_samples(
     """
     if n_surface < 0:
         raise ValueError(f"n_surface must be >= 0, got {n_surface}")
+    stratified_noise, surface_noise = (None, None) if noise is None else noise
     zeros = torch.zeros_like(depth)
-    z = uniform_samples(zeros, far_factor * depth, n_stratified, perturb, generator)
+    z = uniform_samples(
+        zeros, far_factor * depth, n_stratified, perturb, generator, stratified_noise
+    )
     if n_surface > 0:
         half = surface_band * truncation
-        surface = uniform_samples(depth - half, depth + half, n_surface, perturb, generator)
+        surface = uniform_samples(
+            depth - half, depth + half, n_surface, perturb, generator, surface_noise
+        )
         z = torch.sort(torch.cat((z, surface), dim=1), dim=1).values
     return z
+
+
+def draw_depth_guided_noise(
+    count: int,
+    n_stratified: int,
+    n_surface: int,
+    generator: torch.Generator | None,
+    like: torch.Tensor,
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """The uniforms :func:`depth_guided_samples` jitters ``count`` rays with, drawn in the
+    order it draws them itself: (count, n_stratified), then (count, n_surface)."""
+    stratified = _unit_rand((count, n_stratified), like, generator)
+    surface = _unit_rand((count, n_surface), like, generator)
+    return stratified, surface
 
 
 def ray_box_intersection(

@@ -23,7 +23,14 @@ from eslam.field.scene_field import SceneField
 from eslam.geometry.pose import pose_from_quaternion_translation, quaternion_translation_from_pose
 from eslam.losses import compute_losses
 from eslam.render.renderer import render_rays
-from eslam.slam.views import View, concatenate_rays, sample_view_rays
+from eslam.slam.views import (
+    RayDraws,
+    View,
+    concatenate_rays,
+    draw_rays,
+    pixels_from_uniforms,
+    view_rays,
+)
 
 
 @dataclass(frozen=True)
@@ -118,6 +125,37 @@ def mapping_optimiser(
     return torch.optim.Adam(groups)
 
 
+def mapping_loss(
+    field: SceneField,
+    views: list[View],
+    window: WindowPoses,
+    draws: RayDraws,
+    settings: MappingSettings,
+) -> torch.Tensor:
+    """The mapping loss over the window, a pure function of tensors (compilable).
+
+    Rays through the pixels ``draws`` chose in each view at its current pose, rendered
+    with its jitter, scored by the shared loss with the mapping weights.
+    """
+    current = window.current()
+    rays = concatenate_rays(
+        [
+            view_rays(view, current[k], pixels_from_uniforms(view, draws.pixels[k]))
+            for k, view in enumerate(views)
+        ]
+    )
+    output = render_rays(
+        field,
+        rays,
+        settings.render,
+        perturb=settings.render.perturb,
+        check=False,
+        noise=draws.jitter,
+    )
+    terms = compute_losses(output, rays, settings.mapping.weights, field.truncation, settings.loss)
+    return terms.total
+
+
 def mapping_step(
     field: SceneField,
     views: list[View],
@@ -128,30 +166,17 @@ def mapping_step(
 ) -> torch.Tensor:
     """One mapping iteration over the window; returns the loss (0-d, detached, before the step).
 
-    ``mapping.rays // W`` rays from each view at its current pose. No host
-    synchronisation and fixed shapes.
+    ``mapping.rays // W`` rays from each of the W views. No host synchronisation and
+    fixed shapes.
     """
-    rays_per_view = max(1, settings.mapping.rays // len(views))
-    current = window.current()
-    rays = concatenate_rays(
-        [
-            sample_view_rays(view, current[k], rays_per_view, generator)
-            for k, view in enumerate(views)
-        ]
-    )
-    output = render_rays(
-        field,
-        rays,
-        settings.render,
-        perturb=settings.render.perturb,
-        generator=generator,
-        check=False,
-    )
-    terms = compute_losses(output, rays, settings.mapping.weights, field.truncation, settings.loss)
+    per_view = max(1, settings.mapping.rays // len(views))
+    device = window.fixed.device
+    draws = draw_rays(len(views), per_view, settings.render, generator, device)
+    loss = mapping_loss(field, views, window, draws, settings)
     optimiser.zero_grad(set_to_none=True)
-    terms.total.backward()
+    loss.backward()
     optimiser.step()
-    return terms.total.detach()
+    return loss.detach()
 
 
 def map_window(

@@ -22,7 +22,7 @@ from eslam.config import LossConfig, RenderConfig, RenderTrackerConfig
 from eslam.geometry.pose import pose_from_quaternion_translation, quaternion_translation_from_pose
 from eslam.losses import compute_losses
 from eslam.render.renderer import SceneFieldLike, render_rays
-from eslam.slam.views import View, sample_view_rays
+from eslam.slam.views import RayDraws, View, draw_rays, pixels_from_uniforms, view_rays
 
 
 @dataclass(frozen=True)
@@ -100,34 +100,31 @@ def pose_optimiser(variables: PoseVariables, config: RenderTrackerConfig) -> tor
     )
 
 
-def tracking_step(
+def tracking_loss(
     field: SceneFieldLike,
     view: View,
     variables: PoseVariables,
-    optimiser: torch.optim.Optimizer,
+    draws: RayDraws,
     settings: TrackingSettings,
-    generator: torch.Generator,
 ) -> tuple[torch.Tensor, torch.Tensor]:
-    """One tracking iteration: render rays at the current pose, step Adam on the loss.
+    """The tracking loss at the current pose, a pure function of tensors (compilable).
 
-    No host synchronisation: no ``float()``, ``.item()`` or ``bool()`` of device
-    tensors, fixed shapes (``settings.tracking.rays`` rays). Call it with the field
-    frozen (:class:`frozen`).
+    Rays through the pixels ``draws`` chose, rendered with its jitter, scored by the
+    shared loss with tracking weights and outlier rejection.
 
     Returns:
-        The loss (0-d, detached) and the (4, 4) pose it was computed at (detached),
-        both before the step.
+        The total loss (0-d) and the (4, 4) pose it was computed at, both with gradients.
     """
     config = settings.tracking
     c2w = variables.pose()
-    rays = sample_view_rays(view, c2w, config.rays, generator)
+    rays = view_rays(view, c2w, pixels_from_uniforms(view, draws.pixels[0]))
     output = render_rays(
         field,
         rays,
         settings.render,
         perturb=settings.render.perturb,
-        generator=generator,
         check=False,
+        noise=draws.jitter,
     )
     terms = compute_losses(
         output,
@@ -137,10 +134,34 @@ def tracking_step(
         settings.loss,
         outlier_factor=config.outlier_factor,
     )
+    return terms.total, c2w
+
+
+def tracking_step(
+    field: SceneFieldLike,
+    view: View,
+    variables: PoseVariables,
+    optimiser: torch.optim.Optimizer,
+    settings: TrackingSettings,
+    generator: torch.Generator,
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """One tracking iteration: draw the rays, take the loss, step Adam.
+
+    No host synchronisation: no ``float()``, ``.item()`` or ``bool()`` of device
+    tensors, fixed shapes (``settings.tracking.rays`` rays). Call it with the field
+    frozen (:class:`frozen`).
+
+    Returns:
+        The loss (0-d, detached) and the (4, 4) pose it was computed at (detached),
+        both before the step.
+    """
+    device = view.depth.device
+    draws = draw_rays(1, settings.tracking.rays, settings.render, generator, device)
+    loss, c2w = tracking_loss(field, view, variables, draws, settings)
     optimiser.zero_grad(set_to_none=True)
-    terms.total.backward()
+    loss.backward()
     optimiser.step()
-    return terms.total.detach(), c2w.detach()
+    return loss.detach(), c2w.detach()
 
 
 def keep_best(

@@ -12,7 +12,9 @@ from dataclasses import dataclass
 
 import torch
 
+from eslam.config import RenderConfig
 from eslam.render.rays import rays_from_pixels
+from eslam.render.sampling import draw_depth_guided_noise
 from eslam.types import RayBatch
 
 
@@ -66,19 +68,31 @@ def make_view(
     )
 
 
-def sample_view_pixels(view: View, count: int, generator: torch.Generator) -> torch.Tensor:
-    """(count,) int64 pixel indices drawn uniformly, with replacement, among the sampleable.
+def pixels_from_uniforms(view: View, uniform: torch.Tensor) -> torch.Tensor:
+    """(n,) int64 pixels of ``view`` chosen by (n,) uniforms in [0, 1): uniform, with
+    replacement, among the sampleable pixels.
 
     The k-th sampleable pixel (0-based) is the first p with cumulative[p] >= k + 1, and
-    k = floor(u * M) with u ~ U[0, 1) and M = ``view.count``: fixed shapes, no host sync.
-    A view without sampleable pixels yields pixel 0 (callers check
-    :meth:`View.sampleable_pixels` once per frame).
+    k = floor(u * M) with M = ``view.count``: fixed shapes, no host sync. A view without
+    sampleable pixels yields pixel 0 (callers check :meth:`View.sampleable_pixels` once
+    per frame).
     """
-    uniform = torch.rand(count, generator=generator, device=view.cumulative.device)
     rank = (uniform * view.count).to(torch.int64)
     rank = torch.minimum(rank, (view.count - 1).clamp(min=0))
     pixels = torch.searchsorted(view.cumulative, rank + 1)
     return pixels.clamp(max=view.cumulative.shape[0] - 1)
+
+
+def sample_view_pixels(view: View, count: int, generator: torch.Generator) -> torch.Tensor:
+    """(count,) pixels drawn uniformly, with replacement, among the sampleable ones."""
+    uniform = torch.rand(count, generator=generator, device=view.cumulative.device)
+    return pixels_from_uniforms(view, uniform)
+
+
+def view_rays(view: View, c2w: torch.Tensor, pixels: torch.Tensor) -> RayBatch:
+    """The rays through ``pixels`` (n,) of ``view`` seen from ``c2w`` (4, 4), differentiable
+    with respect to ``c2w``."""
+    return rays_from_pixels(view.directions[pixels], c2w, view.depth[pixels], view.rgb[pixels])
 
 
 def sample_view_rays(
@@ -88,8 +102,46 @@ def sample_view_rays(
 
     Differentiable with respect to ``c2w`` (4, 4), so poses can be optimised.
     """
-    pixels = sample_view_pixels(view, count, generator)
-    return rays_from_pixels(view.directions[pixels], c2w, view.depth[pixels], view.rgb[pixels])
+    return view_rays(view, c2w, sample_view_pixels(view, count, generator))
+
+
+@dataclass(frozen=True, eq=False)
+class RayDraws:
+    """Every random number one optimisation step uses, drawn before it runs.
+
+    Drawing them ahead (in the order the step used to draw them itself) leaves the
+    step's computation a pure function of tensors, which ``torch.compile`` traces as
+    one graph and a CUDA graph can replay.
+
+    Attributes:
+        pixels: (V, n) uniforms choosing n pixels in each of V views.
+        jitter: the stratified (V n, S1) and surface (V n, S2) sample jitter, or None
+            when samples are not perturbed.
+    """
+
+    pixels: torch.Tensor
+    jitter: tuple[torch.Tensor, torch.Tensor] | None
+
+
+def draw_rays(
+    views: int,
+    per_view: int,
+    render: RenderConfig,
+    generator: torch.Generator,
+    device: torch.device,
+) -> RayDraws:
+    """The draws of one step over ``views`` views with ``per_view`` rays each: the pixels
+    of each view in turn, then the jitter of all rays (the renderer's order)."""
+    pixels = torch.stack(
+        [torch.rand(per_view, generator=generator, device=device) for _ in range(views)]
+    )
+    jitter = None
+    if render.perturb:
+        like = pixels
+        jitter = draw_depth_guided_noise(
+            views * per_view, render.samples_stratified, render.samples_surface, generator, like
+        )
+    return RayDraws(pixels=pixels, jitter=jitter)
 
 
 def concatenate_rays(batches: list[RayBatch]) -> RayBatch:

@@ -1,0 +1,126 @@
+"""The optimisation steps: drawn ahead, pure in between, free of host syncs, compilable."""
+
+from __future__ import annotations
+
+import pytest
+import torch
+
+from eslam.config import ESLAMConfig
+from eslam.field.scene_field import SceneField
+from eslam.render.rays import camera_directions
+from eslam.render.renderer import render_rays
+from eslam.slam.mapping import (
+    MappingSettings,
+    WindowPoses,
+    mapping_loss,
+    mapping_optimiser,
+    mapping_step,
+)
+from eslam.slam.tracking import (
+    PoseVariables,
+    TrackingSettings,
+    frozen,
+    keep_best,
+    pose_optimiser,
+    tracking_loss,
+    tracking_step,
+)
+from eslam.slam.views import (
+    draw_rays,
+    make_view,
+    pixels_from_uniforms,
+    sample_view_rays,
+    view_rays,
+)
+from eslam.types import Intrinsics
+
+CAMERA = Intrinsics(width=40, height=30, fx=30.0, fy=30.0, cx=19.5, cy=14.5)
+BOUND = torch.tensor([[-1.0, 1.0], [-1.0, 1.0], [-1.0, 1.5]])
+
+
+def _setup(device: str = "cpu"):
+    config = ESLAMConfig()
+    field = SceneField(config.field, BOUND, torch.Generator().manual_seed(0)).to(device)
+    depth = torch.full((30, 40), 0.8, device=device)
+    depth[:, :10] = 0.0  # invalid depth: never sampled
+    rgb = torch.rand(30, 40, 3, generator=torch.Generator().manual_seed(1)).to(device)
+    view = make_view(rgb, depth, camera_directions(CAMERA, device), border=2)
+    return config, field, view
+
+
+def test_views_sample_only_valid_pixels_inside_the_border() -> None:
+    _, _, view = _setup()
+    assert view.sampleable_pixels() == (30 - 4) * (40 - 10 - 2)
+    uniforms = torch.linspace(0.0, 0.999999, 5000)
+    pixels = pixels_from_uniforms(view, uniforms)
+    u, v = pixels % 40, pixels // 40
+    assert bool(((u >= 10) & (u < 38) & (v >= 2) & (v < 28)).all())
+    assert len(torch.unique(pixels)) == view.sampleable_pixels()  # every one reachable
+
+
+def test_drawing_ahead_gives_the_renderers_own_draws() -> None:
+    config, field, view = _setup()
+    generator = torch.Generator().manual_seed(6)
+    rays = sample_view_rays(view, torch.eye(4), 300, generator)
+    inline = render_rays(field, rays, config.render, True, generator)
+    draws = draw_rays(1, 300, config.render, torch.Generator().manual_seed(6), torch.device("cpu"))
+    rays = view_rays(view, torch.eye(4), pixels_from_uniforms(view, draws.pixels[0]))
+    ahead = render_rays(field, rays, config.render, True, noise=draws.jitter)
+    assert torch.equal(inline.z_vals, ahead.z_vals) and torch.equal(inline.depth, ahead.depth)
+
+
+def test_keep_best_chooses_on_the_device() -> None:
+    best = torch.tensor(2.0), torch.zeros(4, 4)
+    loss, pose = keep_best(*best, torch.tensor(1.0), torch.ones(4, 4))
+    assert float(loss) == 1.0 and bool((pose == 1).all())
+    loss, pose = keep_best(loss, pose, torch.tensor(1.0), torch.full((4, 4), 7.0))
+    assert bool((pose == 1).all())  # ties keep the earlier pose
+
+
+@pytest.mark.slow
+def test_losses_compile_as_one_graph() -> None:
+    """torch.compile(fullgraph=True) traces the tracking and mapping losses without a
+    graph break (backend "eager": the trace, not a C++ build). The random draws and the
+    optimiser step stay outside (a torch.Generator argument and Optimizer.zero_grad /
+    backward() are graph breaks by design in dynamo), which is why the steps draw ahead."""
+    torch._dynamo.reset()
+    config, field, view = _setup()
+    generator = torch.Generator().manual_seed(0)
+    settings = TrackingSettings(config.tracking.render, config.render, config.loss)
+    variables = PoseVariables.from_pose(torch.eye(4))
+    draws = draw_rays(1, 200, config.render, generator, torch.device("cpu"))
+    compiled = torch.compile(tracking_loss, fullgraph=True, backend="eager")
+    with frozen(field):
+        eager_loss, _ = tracking_loss(field, view, variables, draws, settings)
+        traced_loss, _ = compiled(field, view, variables, draws, settings)
+    assert torch.equal(eager_loss, traced_loss)
+    mapping = MappingSettings(config.mapping, config.render, config.loss)
+    window = WindowPoses.create(torch.eye(4).repeat(2, 1, 1), [False, True])
+    draws = draw_rays(2, 100, config.render, generator, torch.device("cpu"))
+    compiled_mapping = torch.compile(mapping_loss, fullgraph=True, backend="eager")
+    eager = mapping_loss(field, [view, view], window, draws, mapping)
+    assert torch.equal(eager, compiled_mapping(field, [view, view], window, draws, mapping))
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="no CUDA device")
+def test_steps_do_not_sync_with_the_device() -> None:
+    config, field, view = _setup("cuda")
+    generator = torch.Generator(device="cuda").manual_seed(0)
+    settings = TrackingSettings(config.tracking.render, config.render, config.loss)
+    variables = PoseVariables.from_pose(torch.eye(4, device="cuda"))
+    optimiser = pose_optimiser(variables, config.tracking.render)
+    mapping = MappingSettings(config.mapping, config.render, config.loss)
+    window = WindowPoses.create(torch.eye(4, device="cuda").repeat(2, 1, 1), [False, True])
+    map_optimiser = mapping_optimiser(field, window, config.mapping, 1.0)
+    for _ in range(2):  # the first call of each may initialise lazily
+        with frozen(field):
+            tracking_step(field, view, variables, optimiser, settings, generator)
+        mapping_step(field, [view, view], window, map_optimiser, mapping, generator)
+    torch.cuda.synchronize()
+    torch.cuda.set_sync_debug_mode("error")
+    try:
+        with frozen(field):
+            tracking_step(field, view, variables, optimiser, settings, generator)
+        mapping_step(field, [view, view], window, map_optimiser, mapping, generator)
+    finally:
+        torch.cuda.set_sync_debug_mode("default")
