@@ -5,16 +5,17 @@ One tracking iteration (2000 rays) and one mapping iteration (4000 rays over a w
 (``FieldConfig.plane_sampling`` "reference" and "fast"), plus the field query alone
 (2000 x 40 points, forward + backward). Every figure is the median and the 90th
 percentile of ``--repeats`` timed iterations after ``--warmup`` untimed ones
-(``time.perf_counter``, with ``torch.cuda.synchronize()`` around each on CUDA).
+(``time.perf_counter``, with ``torch.cuda.synchronize()`` around each on CUDA: the
+steps themselves never sync).
 
 The workload needs no dataset: the field spans Replica room0's bound as the authors
 publish it (so the planes have the paper's sizes, about 6.6 M learnable parameters)
 with the paper's FieldConfig, RenderConfig, LossConfig, TrackingConfig and
 MappingConfig defaults; the images are synthetic, Replica-sized (1200 x 680, fx = fy =
 600) with seeded random depths in [0.5, 4] m and random colours, seen from seeded random
-poses inside the bound. The iterations are built from the same public pieces
-``track_frame`` and ``map_window`` use (sample_view_rays, render_rays, compute_losses,
-pose_from_quaternion_translation, Adam with the configured learning rates).
+poses inside the bound. The iterations are the run's own step functions,
+:func:`eslam.slam.tracking.tracking_step` and :func:`eslam.slam.mapping.mapping_step`
+(no copies), with the optimisers the run builds.
 
 The markdown table is printed and, unless ``--no-append``, appended to
 docs/benchmarks.md with the date, the machine and the command line.
@@ -47,16 +48,17 @@ from _machine import (
 
 from eslam.config import ESLAMConfig
 from eslam.field.scene_field import SceneField
-from eslam.geometry.pose import (
-    pose_from_quaternion_translation,
-    quaternion_to_matrix,
-    quaternion_translation_from_pose,
-)
-from eslam.losses import compute_losses
+from eslam.geometry.pose import quaternion_to_matrix
 from eslam.render.rays import camera_directions
-from eslam.render.renderer import render_rays
-from eslam.slam.tracking import frozen
-from eslam.slam.views import View, concatenate_rays, make_view, sample_view_rays
+from eslam.slam.mapping import MappingSettings, WindowPoses, mapping_optimiser, mapping_step
+from eslam.slam.tracking import (
+    PoseVariables,
+    TrackingSettings,
+    frozen,
+    pose_optimiser,
+    tracking_step,
+)
+from eslam.slam.views import View, make_view
 from eslam.types import Intrinsics
 
 ROOM0_BOUND = [[-1.9, 7.9], [-2.2, 4.5], [-2.5, 2.3]]
@@ -158,85 +160,40 @@ def field_query_step(field: SceneField, points: torch.Tensor) -> Callable[[], No
     return step
 
 
-def tracking_step(
+def tracking_iteration(
     field: SceneField,
     view: View,
     pose: torch.Tensor,
     config: ESLAMConfig,
     generator: torch.Generator,
-) -> Callable[[], float]:
-    """One iteration of ``track_frame`` (call it with the field frozen)."""
-    tracking = config.tracking
-    quaternion, translation = quaternion_translation_from_pose(pose)
-    quaternion = quaternion.clone().requires_grad_(True)
-    translation = translation.clone().requires_grad_(True)
-    optimiser = torch.optim.Adam(
-        [
-            {"params": [translation], "lr": tracking.render.lr_translation},
-            {"params": [quaternion], "lr": tracking.render.lr_rotation},
-        ],
-        betas=tracking.render.adam_betas,
-    )
+) -> Callable[[], object]:
+    """One iteration of the rendering tracker: :func:`eslam.slam.tracking.tracking_step`
+    (call it with the field frozen)."""
+    settings = TrackingSettings(config.tracking.render, config.render, config.loss)
+    variables = PoseVariables.from_pose(pose)
+    optimiser = pose_optimiser(variables, config.tracking.render)
 
-    def step() -> float:
-        c2w = pose_from_quaternion_translation(quaternion, translation)
-        rays = sample_view_rays(view, c2w, tracking.render.rays, generator)
-        output = render_rays(field, rays, config.render, perturb=True, generator=generator)
-        terms = compute_losses(
-            output,
-            rays,
-            tracking.render.weights,
-            field.truncation,
-            config.loss,
-            outlier_factor=tracking.render.outlier_factor,
-        )
-        loss = float(terms.total.detach())  # track_frame reads the loss every iteration
-        optimiser.zero_grad(set_to_none=True)
-        terms.total.backward()
-        optimiser.step()
-        return loss
+    def step() -> object:
+        return tracking_step(field, view, variables, optimiser, settings, generator)
 
     return step
 
 
-def mapping_step(
+def mapping_iteration(
     field: SceneField,
     views: list[View],
     poses: torch.Tensor,
     config: ESLAMConfig,
     generator: torch.Generator,
-) -> Callable[[], float]:
-    """One iteration of ``map_window``: planes, decoders and all poses but the oldest."""
-    mapping = config.mapping
-    movable = list(range(1, len(views)))
-    index = torch.tensor(movable, device=poses.device)
-    quaternions, translations = quaternion_translation_from_pose(poses[movable])
-    quaternions = quaternions.clone().requires_grad_(True)
-    translations = translations.clone().requires_grad_(True)
-    optimiser = torch.optim.Adam(
-        [
-            {"params": field.plane_parameters(), "lr": mapping.lr_planes},
-            {"params": field.decoder_parameters(), "lr": mapping.lr_decoders},
-            {"params": [quaternions, translations], "lr": mapping.lr_poses},
-        ]
-    )
-    rays_per_view = max(1, mapping.rays // len(views))
+) -> Callable[[], object]:
+    """One iteration of :func:`eslam.slam.mapping.mapping_step`: planes, decoders and all
+    poses but the oldest."""
+    settings = MappingSettings(config.mapping, config.render, config.loss)
+    window = WindowPoses.create(poses, [k > 0 for k in range(len(views))])
+    optimiser = mapping_optimiser(field, window, config.mapping, lr_factor=1.0)
 
-    def step() -> float:
-        refined = pose_from_quaternion_translation(quaternions, translations)
-        current = poses.index_put((index,), refined)
-        rays = concatenate_rays(
-            [
-                sample_view_rays(view, current[k], rays_per_view, generator)
-                for k, view in enumerate(views)
-            ]
-        )
-        output = render_rays(field, rays, config.render, perturb=True, generator=generator)
-        terms = compute_losses(output, rays, mapping.weights, field.truncation, config.loss)
-        optimiser.zero_grad(set_to_none=True)
-        terms.total.backward()
-        optimiser.step()
-        return float(terms.total.detach())  # map_window reads the loss every iteration
+    def step() -> object:
+        return mapping_step(field, views, window, optimiser, settings, generator)
 
     return step
 
@@ -255,7 +212,9 @@ def run(
     bound = torch.tensor(ROOM0_BOUND)
     poses = random_poses(WINDOW, bound, data).to(device)
     low, high = bound[:, 0], bound[:, 1]
-    points = low + (high - low) * torch.rand(config.tracking.render.rays * samples, 3, generator=data)
+    points = low + (high - low) * torch.rand(
+        config.tracking.render.rays * samples, 3, generator=data
+    )
     points = points.to(device)
     results: dict[tuple[str, str], Stats] = {}
     facts: dict[str, object] = {"samples": samples, "points": points.shape[0]}
@@ -267,11 +226,11 @@ def run(
             field_query_step(field, points), warmup, repeats, device
         )
         generator = torch.Generator(device=device).manual_seed(SEED)
-        step = tracking_step(field, views[-1], poses[-1], config, generator)
+        step = tracking_iteration(field, views[-1], poses[-1], config, generator)
         with frozen(field):
             results["tracking", sampling] = time_iterations(step, warmup, repeats, device)
         generator = torch.Generator(device=device).manual_seed(SEED)
-        step = mapping_step(field, views, poses, config, generator)
+        step = mapping_iteration(field, views, poses, config, generator)
         results["mapping", sampling] = time_iterations(step, warmup, repeats, device)
         del field, step
     return results, facts

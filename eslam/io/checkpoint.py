@@ -17,8 +17,9 @@ import torch
 from eslam.atomic import write_with
 from eslam.errors import InputError
 
-CHECKPOINT_VERSION = 1
-"""Format version of the checkpoint layout; bumped when the state's keys change meaning."""
+CHECKPOINT_VERSION = 2
+"""Format version of the checkpoint layout; bumped when the state's keys change meaning
+(2: the trajectory record replaced the preallocated pose array and keyframe poses)."""
 VERSION_KEY = "eslam_checkpoint"
 """Key of the format version in the saved file."""
 _LEAF_TYPES = (torch.Tensor, bool, int, float, str, type(None))

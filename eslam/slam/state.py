@@ -163,15 +163,9 @@ def load_state(path: Path, config: ESLAMConfig, device: torch.device) -> SLAMSta
     """Read the checkpoint ``path`` back into a state on ``device``.
 
     Raises:
-        InputError: a map written by another configuration or an older eslam.
+        InputError: a map written by another configuration or format version.
     """
     saved = load_checkpoint(path, map_location="cpu")
-    if "trajectory" not in saved:
-        raise InputError(
-            path,
-            "was written by an older eslam (no trajectory record), so it cannot be resumed",
-            "start the run again with `eslam run ... --overwrite`",
-        )
     try:
         field_ = None
         if saved["field"] is not None:

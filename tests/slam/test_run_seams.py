@@ -3,6 +3,7 @@ every completed frame (and resume exactly), and runs that leave no process-wide 
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import logging
 import shutil
@@ -18,13 +19,15 @@ from eslam.cli import EXIT_USER_ERROR, main
 from eslam.config import DataConfig, load_config
 from eslam.data import open_sequence
 from eslam.data.source import IterableSource
-from eslam.errors import RunInterrupted, RunStopped
+from eslam.errors import ConfigError, RunInterrupted, RunStopped
 from eslam.io.checkpoint import load_checkpoint
 from eslam.io.trajectory import read_tum_trajectory
 from eslam.slam.loop import run_slam
 from eslam.slam.observers import FrameDone, MappingDone, RunEnd, RunObserverBase, RunStart
+from eslam.slam.trackers import TRACKERS, make_tracker
+from eslam.slam.tracking import TrackingResult
 from eslam.workflows.demo import DEMO_CONFIG
-from tests.conftest import TINY, TINY_FRAMES, tiny_config
+from tests.conftest import TINY, TINY_FRAMES, static_ate_cm, tiny_config
 
 
 def _frames(sequence: Path):
@@ -163,3 +166,34 @@ def test_a_run_leaves_no_process_wide_state(tiny_sequence: Path, tmp_path: Path)
     )  # fmt: skip
     np.testing.assert_array_equal(second.poses, np.load(alone))
     assert second.metrics["peak_memory_mb"] > 0
+
+
+class StandingStill:
+    """A tracker that never moves the pose: what the loop tests must be able to catch."""
+
+    def track(self, field, view, initial_pose, generator):
+        return TrackingResult(pose=initial_pose, loss=torch.zeros(()))
+
+
+def test_a_new_tracker_plugs_in_and_a_dead_one_is_caught(
+    tiny_sequence: Path, tiny_run, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setitem(TRACKERS, "still", lambda config: StandingStill())
+    config = tiny_config(tiny_sequence, "output.mesh=false")
+    config = dataclasses.replace(
+        config,
+        tracking=dataclasses.replace(config.tracking, method="still", constant_velocity=False),
+        mapping=dataclasses.replace(config.mapping, optimise_poses=False),
+    )
+    assert isinstance(make_tracker(config), StandingStill)
+    dead = run_slam(config, tmp_path / "dead")
+    gt = read_tum_trajectory(tmp_path / "dead" / "trajectory_gt.txt")[1]
+    assert len(gt) == TINY_FRAMES
+    static = static_ate_cm(gt)
+    # the dead tracker scores the static baseline the loop tests compare against ...
+    assert dead.metrics["ate_rmse_cm"] == pytest.approx(static, rel=1e-3)
+    # ... and the real one is far below it
+    assert tiny_run.metrics["ate_rmse_cm"] < 0.3 * static
+    unknown = dataclasses.replace(config, tracking=dataclasses.replace(config.tracking, method="x"))
+    with pytest.raises(ConfigError, match=r"unknown tracking.method 'x'.*render"):
+        make_tracker(unknown)
