@@ -237,3 +237,24 @@ def test_recon_office0_exact_against_itself_and_one_centimetre_off(
     assert main(["recon", str(tmp_path / "displaced.ply"), str(gt_path), *options]) == 0
     off = json.loads(capsys.readouterr().out)
     assert abs(off["accuracy_cm"] - 1.0) < 0.1 and abs(off["completion_cm"] - 1.0) < 0.1
+
+
+def test_sigterm_stops_a_command_like_ctrl_c(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    import os
+    import signal
+    import time
+
+    import eslam.cli as cli
+
+    def terminated(args) -> int:
+        os.kill(os.getpid(), signal.SIGTERM)
+        time.sleep(5)  # the handler raises long before
+        return 0
+
+    before = signal.getsignal(signal.SIGTERM)
+    monkeypatch.setattr(cli, "_command_resume", terminated)
+    assert cli.main(["resume", "somewhere"]) == 130
+    assert "eslam resume: interrupted" in capsys.readouterr().err
+    assert signal.getsignal(signal.SIGTERM) == before  # restored after the command

@@ -19,6 +19,8 @@ from eslam.slam.loop import run_slam
 from eslam.workflows.demo import DEMO_CONFIG
 from tests.conftest import TINY as LOOP_TINY
 
+pytestmark = pytest.mark.slow  # integration: whole runs (still run in CI)
+
 FRAMES = 12
 # tests/slam/test_loop.py's tiny settings, without the mesh (bounds are what is tested)
 TINY = [*LOOP_TINY, "output.mesh=false"]

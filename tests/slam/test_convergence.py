@@ -33,6 +33,8 @@ from eslam.slam.tracking import TrackingSettings, track_frame
 from eslam.slam.views import View, make_view, sample_view_rays
 from eslam.types import Frame, RayBatch
 
+pytestmark = pytest.mark.slow  # fits a map over many iterations (still run in CI)
+
 SEQUENCE = SynthConfig(frames=40, width=160, height=120, seed=0)
 KEYFRAMES = list(range(0, SEQUENCE.frames, 4))
 HELD_OUT = (2, 6, 10)

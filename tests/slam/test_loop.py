@@ -15,6 +15,8 @@ from eslam.slam.loop import run_slam
 from eslam.workflows.demo import DEMO_CONFIG
 from tests.conftest import TINY_FRAMES, tiny_config
 
+pytestmark = pytest.mark.slow  # integration: whole runs (still run in CI)
+
 FRAMES = TINY_FRAMES
 
 

@@ -29,6 +29,8 @@ from eslam.slam.tracking import TrackingResult
 from eslam.workflows.demo import DEMO_CONFIG
 from tests.conftest import TINY, TINY_FRAMES, static_ate_cm, tiny_config
 
+pytestmark = pytest.mark.slow  # integration: whole runs (still run in CI)
+
 
 def _frames(sequence: Path):
     """A generator over the sequence's frames: no length, no indexing."""
