@@ -15,6 +15,7 @@ from eslam.config.schema import (
     DataConfig,
     ESLAMConfig,
     FieldConfig,
+    HybridTrackerConfig,
     LossConfig,
     LossWeights,
     MappingConfig,
@@ -22,6 +23,7 @@ from eslam.config.schema import (
     RenderConfig,
     RenderTrackerConfig,
     SceneConfig,
+    SdfTrackerConfig,
     TrackingConfig,
 )
 
@@ -32,6 +34,7 @@ __all__ = [
     "ESLAMConfig",
     "FieldConfig",
     "FieldHelp",
+    "HybridTrackerConfig",
     "LossConfig",
     "LossWeights",
     "MappingConfig",
@@ -39,6 +42,7 @@ __all__ = [
     "RenderConfig",
     "RenderTrackerConfig",
     "SceneConfig",
+    "SdfTrackerConfig",
     "TrackingConfig",
     "config_from_dict",
     "config_help",

@@ -217,7 +217,59 @@ class RenderTrackerConfig:
             )
 
 
-TRACKING_METHODS = ("render",)
+@dataclass
+class SdfTrackerConfig:
+    """The SDF tracker (``tracking.method: sdf``): Levenberg-Marquardt on the map's TSDF
+    at back-projected depth points (docs/tracking.md)."""
+
+    levels: tuple[int, ...] = (1000, 4000)
+    """Points used per level, coarse to fine: the first N of one seeded subset of the
+    frame's valid pixels (the last level's count is drawn)."""
+    iterations: int = 20
+    """Cap on Levenberg-Marquardt iterations per level (a level stops earlier once a
+    step is below the convergence thresholds)."""
+    robust: Literal["huber", "geman_mcclure"] = "huber"
+    """Robust loss on the SDF residuals (metres)."""
+    robust_scale: float = 0.01
+    """Scale c of the robust loss, metres (Huber: quadratic below c)."""
+    max_sdf: float = 0.9
+    """Points with |TSDF| at or above this (units of T) get weight 0: the truncated field
+    is flat there and says nothing about the pose."""
+    damping: float = 0.0001
+    """Initial Levenberg-Marquardt damping lambda (relative to diag(J^T W J))."""
+    converged_translation: float = 0.0001
+    """A step shorter than this (metres) ..."""
+    converged_rotation: float = 0.0002
+    """... and turning less than this (radians) ends the level."""
+    min_inlier_fraction: float = 0.5
+    """Below this share of points fitting the map (in the band, |r| <= c) the frame
+    counts as failed: it keeps the motion model's pose and is no keyframe."""
+    max_residual: float = 0.02
+    """A robust RMS residual of the inliers above this (metres) also fails the frame."""
+
+    def __post_init__(self) -> None:
+        if not self.levels or min(self.levels) < 6 or list(self.levels) != sorted(self.levels):
+            raise ValueError(f"levels must be increasing point counts >= 6, got {self.levels}")
+        if self.iterations < 1 or self.robust_scale <= 0 or not 0 < self.max_sdf <= 1:
+            raise ValueError("iterations must be >= 1, robust_scale > 0, max_sdf in (0, 1]")
+        if not 0 <= self.min_inlier_fraction < 1 or self.max_residual <= 0:
+            raise ValueError("min_inlier_fraction must be in [0, 1), max_residual > 0")
+
+
+@dataclass
+class HybridTrackerConfig:
+    """``tracking.method: hybrid``: the SDF tracker, then the rendering tracker's loss."""
+
+    render_iterations: int = 3
+    """Rendering-tracker iterations after the SDF tracker converged (its other settings:
+    ``tracking.render``)."""
+
+    def __post_init__(self) -> None:
+        if self.render_iterations < 1:
+            raise ValueError(f"render_iterations must be >= 1, got {self.render_iterations}")
+
+
+TRACKING_METHODS = ("render", "sdf", "hybrid")
 """Tracker names ``tracking.method`` takes (each a module behind the tracker protocol)."""
 
 
@@ -225,16 +277,21 @@ TRACKING_METHODS = ("render",)
 class TrackingConfig:
     """Camera tracking, once per frame (docs/method.md section 4)."""
 
-    method: Literal["render"] = "render"
-    """Tracker: render = Adam on the rendering loss (paper); its settings are in
-    ``tracking.<method>``."""
+    method: Literal["render", "sdf", "hybrid"] = "render"
+    """Tracker: render = Adam on the rendering loss (paper); sdf = Levenberg-Marquardt on
+    the map's TSDF at the depth points; hybrid = sdf, then a few render iterations. Its
+    settings are in ``tracking.<method>`` (docs/tracking.md)."""
     border: int = 75
     """Pixels at the image border never used (release: 75 Replica and ScanNet, 20 TUM)."""
     constant_velocity: bool = True
     """Motion model: start from the constant-velocity prediction on SE(3); off starts from
     the last pose."""
     render: RenderTrackerConfig = field(default_factory=RenderTrackerConfig)
-    """Settings of the rendering tracker (``method: render``)."""
+    """Settings of the rendering tracker (``method: render``, and hybrid's refinement)."""
+    sdf: SdfTrackerConfig = field(default_factory=SdfTrackerConfig)
+    """Settings of the SDF tracker (``method: sdf`` and ``hybrid``)."""
+    hybrid: HybridTrackerConfig = field(default_factory=HybridTrackerConfig)
+    """Settings of the hybrid tracker (``method: hybrid``)."""
 
     def __post_init__(self) -> None:
         if self.border < 0:

@@ -63,6 +63,7 @@ from eslam.slam.state import (
     initial_state,
     load_state,
     new_field,
+    quality_row,
 )
 from eslam.slam.trackers import make_tracker, predict_pose
 from eslam.slam.views import make_view
@@ -181,6 +182,7 @@ class RunLoop:
                 frame.timestamp,
             )
         tracked = False
+        quality = None
         if index == 0:
             pose = first_pose(frame).to(self.device)
         else:
@@ -190,16 +192,29 @@ class RunLoop:
                 depth = torch.from_numpy(frame.depth).to(self.device)
                 view = make_view(rgb, depth, self.directions, self.config.tracking.border)
                 if view.sampleable_pixels() > 0:
-                    pose = self.tracker.track(state.field, view, pose, state.generator).pose
-                    tracked = True
+                    result = self.tracker.track(state.field, view, pose, state.generator)
+                    tracked, quality = True, result.quality
+                    if quality is None or not quality.failed:
+                        pose = result.pose
+        failed = quality is not None and quality.failed
+        if failed:
+            log.warning(
+                "frame %d (timestamp %.6f): tracking failed (%.0f%% inliers, residual %.1f mm):"
+                " the motion model's pose is kept and the frame is no keyframe",
+                index,
+                frame.timestamp,
+                100.0 * quality.inlier_fraction,
+                1000.0 * quality.residual_m,
+            )
         if state.field is None:
             self._create_field(frame, has_depth, pose)
         state.trajectory.append(pose, frame.timestamp, frame.pose_gt)
+        state.tracking_quality.append(quality_row(quality))
         done_tracking = device_clock(self.device)
-        mapped = self.schedule.is_keyframe(index, has_depth, len(state.keyframes))
+        mapped = not failed and self.schedule.is_keyframe(index, has_depth, len(state.keyframes))
         if mapped:
             self.map_frame(frame, index)
-        state.last_mapped = mapped or not has_depth
+        state.last_mapped = mapped or failed or not has_depth
         done = device_clock(self.device)
         state.tracking_time.append(done_tracking - started)
         state.mapping_time.append(done - done_tracking)
@@ -208,6 +223,7 @@ class RunLoop:
             index=index,
             pose=state.trajectory.poses[index],
             tracked=tracked,
+            quality=quality,
             mapped=mapped,
             tracking_s=done_tracking - started,
             mapping_s=done - done_tracking,

@@ -21,6 +21,7 @@ from typing import TYPE_CHECKING, Protocol
 import torch
 
 from eslam.config import ESLAMConfig
+from eslam.slam.tracking import TrackingQuality
 
 if TYPE_CHECKING:
     from eslam.slam.state import SLAMState
@@ -58,6 +59,8 @@ class FrameDone:
         pose: (4, 4) its pose estimate on the device (before later refinement).
         tracked: whether the tracker ran (False for frame 0, frames without depth and
             frames before the first keyframe: they keep the motion model's pose).
+        quality: the tracker's judgement (None when it has none or did not run); a
+            failed frame keeps the motion model's pose and is no keyframe.
         mapped: whether the frame became a keyframe and was mapped.
         tracking_s / mapping_s: wall time of each part, seconds (device work included).
     """
@@ -65,6 +68,7 @@ class FrameDone:
     index: int
     pose: torch.Tensor
     tracked: bool
+    quality: TrackingQuality | None
     mapped: bool
     tracking_s: float
     mapping_s: float

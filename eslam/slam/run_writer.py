@@ -19,9 +19,18 @@ from eslam.slam.progress import finite_ate_pairs
 from eslam.slam.resources import PeakMemory
 from eslam.slam.state import SLAMState, save_state
 
+TRACKING_COLUMNS = (
+    "tracking_iterations",
+    "tracking_inlier_fraction",
+    "tracking_residual_m",
+    "tracking_failed",
+)
+"""timings.json's per-frame tracking-quality lists (trackers that judge themselves)."""
+
 
 def run_metrics(state: SLAMState, device: str, peak_memory_mb: float) -> dict:
-    """metrics.json of a run: frames, device, FPT, peak memory and, with ground truth, ATE.
+    """metrics.json of a run: frames, device, FPT, peak memory, with a self-judging tracker
+    the failed frames and mean iterations, and with ground truth the ATE.
 
     FPT (seconds per frame) = (sum of tracking and mapping times) / frames. The ATE
     (rigid alignment, cm) uses the frames whose estimate and ground truth are both finite.
@@ -33,6 +42,11 @@ def run_metrics(state: SLAMState, device: str, peak_memory_mb: float) -> dict:
         "fpt_s": float(np.sum(state.tracking_time) + np.sum(state.mapping_time)) / max(done, 1),
         "peak_memory_mb": peak_memory_mb,
     }
+    quality = np.asarray(state.tracking_quality, dtype=np.float64).reshape(-1, 4)
+    judged = np.isfinite(quality[:, 3])
+    if judged.any():
+        metrics["tracking_failures"] = int(quality[judged, 3].sum())
+        metrics["tracking_iterations_mean"] = float(quality[judged, 0].mean())
     gt = state.trajectory.gt_poses()
     if gt is not None:
         poses = state.trajectory.poses.detach().cpu().double().numpy()
@@ -99,7 +113,12 @@ class RunWriter(RunObserverBase):
         if gt is not None:
             usable = finite_ate_pairs(poses, gt)
             write_tum_trajectory(self.run.trajectory_gt, timestamps[usable], gt[usable])
-        write_json(
-            self.run.timings,
-            {"tracking_s": list(state.tracking_time), "mapping_s": list(state.mapping_time)},
-        )
+        timings: dict = {
+            "tracking_s": list(state.tracking_time),
+            "mapping_s": list(state.mapping_time),
+        }
+        quality = np.asarray(state.tracking_quality, dtype=np.float64).reshape(-1, 4)
+        if np.isfinite(quality[:, 3]).any():  # per frame, null where not judged
+            for key, column in zip(TRACKING_COLUMNS, quality.T, strict=True):
+                timings[key] = [None if np.isnan(v) else float(v) for v in column]
+        write_json(self.run.timings, timings)

@@ -25,6 +25,7 @@ from eslam.field.scene_field import SceneField
 from eslam.io.checkpoint import load_checkpoint, save_checkpoint
 from eslam.mesh.observed import ObservedViews
 from eslam.slam.keyframes import KeyframeStore, WindowStrategy, make_window_strategy
+from eslam.slam.tracking import TrackingQuality
 from eslam.slam.trajectory import Trajectory
 from eslam.types import Intrinsics
 
@@ -41,6 +42,8 @@ class SLAMState:
         window: the keyframe window strategy.
         generator: the run's random generator (on the run's device).
         tracking_time / mapping_time: seconds per processed frame.
+        tracking_quality: per processed frame, [iterations, inlier fraction, residual
+            (m), failed (1/0)] from trackers that judge themselves, NaNs otherwise.
         last_mapped: whether the last processed frame needs no mapping at the end of the
             stream (it is a keyframe, or has no depth, or no frame was processed).
         bound_warned: whether the run warned about depth points outside the bound
@@ -54,6 +57,7 @@ class SLAMState:
     generator: torch.Generator
     tracking_time: list[float] = field(default_factory=list)
     mapping_time: list[float] = field(default_factory=list)
+    tracking_quality: list[list[float]] = field(default_factory=list)
     last_mapped: bool = True
     bound_warned: bool = False
 
@@ -96,6 +100,7 @@ class SLAMState:
         self.generator.set_state(mark.generator)
         del self.tracking_time[mark.frames :]
         del self.mapping_time[mark.frames :]
+        del self.tracking_quality[mark.frames :]
         self.last_mapped = mark.last_mapped
         if field_before is not None:
             self.field = field_before
@@ -109,6 +114,18 @@ class FrameMark:
     keyframes: int
     generator: torch.Tensor
     last_mapped: bool
+
+
+def quality_row(quality: TrackingQuality | None) -> list[float]:
+    """A frame's :attr:`SLAMState.tracking_quality` row (NaNs without a judgement)."""
+    if quality is None:
+        return [float("nan")] * 4
+    return [
+        float(quality.iterations),
+        quality.inlier_fraction,
+        quality.residual_m,
+        float(quality.failed),
+    ]
 
 
 def run_generator(config: ESLAMConfig, device: torch.device) -> torch.Generator:
@@ -154,6 +171,7 @@ def save_state(path: Path, state: SLAMState) -> None:
             "generator": state.generator.get_state(),
             "tracking_time": list(state.tracking_time),
             "mapping_time": list(state.mapping_time),
+            "tracking_quality": [list(row) for row in state.tracking_quality],
             "last_mapped": state.last_mapped,
         },
     )
@@ -183,6 +201,7 @@ def load_state(path: Path, config: ESLAMConfig, device: torch.device) -> SLAMSta
             generator=generator,
             tracking_time=list(saved["tracking_time"]),
             mapping_time=list(saved["mapping_time"]),
+            tracking_quality=[list(row) for row in saved["tracking_quality"]],
             last_mapped=bool(saved["last_mapped"]),
         )
     except (KeyError, RuntimeError, ValueError) as error:

@@ -8,6 +8,7 @@ generator)``, plus one entry in :data:`TRACKERS` (and its name in the config's
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from typing import Protocol
 
@@ -17,6 +18,7 @@ from eslam.config import ESLAMConfig
 from eslam.errors import ConfigError
 from eslam.geometry.pose import extrapolate_constant_velocity
 from eslam.render.renderer import SceneFieldLike
+from eslam.slam.sdf_tracking import HybridTracker, SdfTracker
 from eslam.slam.tracking import RenderTracker, TrackingResult, TrackingSettings
 from eslam.slam.views import View
 
@@ -35,11 +37,27 @@ class Tracker(Protocol):
         ...
 
 
-def _render_tracker(config: ESLAMConfig) -> Tracker:
+def _render_tracker(config: ESLAMConfig) -> RenderTracker:
     return RenderTracker(TrackingSettings(config.tracking.render, config.render, config.loss))
 
 
-TRACKERS: dict[str, Callable[[ESLAMConfig], Tracker]] = {"render": _render_tracker}
+def _sdf_tracker(config: ESLAMConfig) -> SdfTracker:
+    return SdfTracker(config.tracking.sdf)
+
+
+def _hybrid_tracker(config: ESLAMConfig) -> HybridTracker:
+    render = dataclasses.replace(
+        config.tracking.render, iterations=config.tracking.hybrid.render_iterations
+    )
+    settings = TrackingSettings(render, config.render, config.loss)
+    return HybridTracker(_sdf_tracker(config), RenderTracker(settings))
+
+
+TRACKERS: dict[str, Callable[[ESLAMConfig], Tracker]] = {
+    "render": _render_tracker,
+    "sdf": _sdf_tracker,
+    "hybrid": _hybrid_tracker,
+}
 """Tracker factory of each ``tracking.method``."""
 
 

@@ -34,6 +34,24 @@ class TrackingSettings:
     loss: LossConfig
 
 
+@dataclass(frozen=True)
+class TrackingQuality:
+    """How well a frame was tracked (trackers that can tell).
+
+    Attributes:
+        iterations: solver iterations taken.
+        inlier_fraction: share of the frame's points that fit the map.
+        residual_m: robust RMS residual of the inliers, metres.
+        failed: the tracker judged the pose unusable (the loop keeps the motion model's
+            pose and makes the frame no keyframe).
+    """
+
+    iterations: int
+    inlier_fraction: float
+    residual_m: float
+    failed: bool
+
+
 @dataclass(frozen=True, eq=False)
 class TrackingResult:
     """Outcome of tracking one frame.
@@ -42,10 +60,12 @@ class TrackingResult:
         pose: (4, 4) float32 camera-to-world pose with the lowest loss.
         loss: 0-d tensor on the compute device, that lowest loss (read it with
             ``float()`` between frames, not inside the iterations).
+        quality: the tracker's own judgement, or None (the rendering tracker has none).
     """
 
     pose: torch.Tensor
     loss: torch.Tensor
+    quality: TrackingQuality | None = None
 
 
 class frozen:

@@ -1,0 +1,254 @@
+"""The SDF tracker (``tracking.method: sdf``): Gauss-Newton on the map's signed distance.
+
+Point-to-implicit tracking (Bylow et al. 2013; KinectFusion's successors; PIN-SLAM):
+a frame's valid depth pixels are back-projected to camera points q_i, moved into the
+world by the pose T, and the map's TSDF is queried once per point, with no rendering.
+A correct pose puts every measured point on the surface, so the residual is
+
+    r_i(T) = T_tr * s(T q_i)        (metres; s is the TSDF in units of T_tr)
+
+and the pose minimises sum_i w_i r_i^2 with robust weights w_i (Huber or
+Geman-McClure on r_i; points whose |s| reaches ``max_sdf`` sit where the truncated
+field is flat and carry no information, and points outside the scene bound read its
+border: both get weight 0). The pose is updated on the left, T <- exp(xi) T with
+xi = (v, omega) (:func:`~eslam.geometry.pose.se3_exp`); to first order a world point
+p = T q moves by v + omega x p, so the Jacobian row of point i is
+
+    J_i = T_tr * [g_i^T, (p_i x g_i)^T],    g_i = grad_p s(p_i)  (autograd through the field)
+
+and each Levenberg-Marquardt step solves (J^T W J + lambda diag(J^T W J)) xi = -J^T W r,
+accepting it when the robust cost drops (lambda shrinks) and rejecting it otherwise
+(lambda grows). The points are a fixed, seeded subset of the frame's valid pixels,
+used coarse to fine (the first ``levels[0]`` points, then more).
+
+Each frame gets a quality figure: the inlier fraction (points inside the band with
+|r| at most the robust scale c) and the robust RMS residual of the inliers. A frame with
+too few inliers or too large a residual is reported as failed (the loop keeps the
+motion model's pose and makes it no keyframe).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+
+from eslam.config import SdfTrackerConfig
+from eslam.geometry.pose import se3_exp
+from eslam.render.renderer import SceneFieldLike
+from eslam.slam.tracking import RenderTracker, TrackingQuality, TrackingResult, frozen
+from eslam.slam.views import View, pixels_from_uniforms
+
+
+def robust_weights(residual: torch.Tensor, scale: float, kind: str) -> torch.Tensor:
+    """IRLS weights of residuals (metres) for the robust loss ``kind`` with ``scale`` c.
+
+    Huber: w = 1 for |r| <= c, else c / |r|. Geman-McClure rho = r^2 / (r^2 + c^2):
+    w = c^4 / (r^2 + c^2)^2 (1 at r = 0, falling off as r^-4).
+    """
+    if kind == "huber":
+        magnitude = residual.abs()
+        return torch.where(magnitude <= scale, torch.ones_like(residual), scale / magnitude)
+    if kind == "geman_mcclure":
+        return scale**4 / (residual.square() + scale**2).square()
+    raise ValueError(f"robust must be 'huber' or 'geman_mcclure', got '{kind}'")
+
+
+def robust_cost(residual: torch.Tensor, scale: float, kind: str) -> torch.Tensor:
+    """(N,) robust loss rho(r) of residuals (metres) whose IRLS weights are
+    :func:`robust_weights`: Huber r^2 / 2 (|r| <= c), c |r| - c^2 / 2 (beyond);
+    Geman-McClure c^2 r^2 / (2 (r^2 + c^2))."""
+    if kind == "huber":
+        magnitude = residual.abs()
+        return torch.where(
+            magnitude <= scale, 0.5 * residual.square(), scale * magnitude - 0.5 * scale**2
+        )
+    if kind == "geman_mcclure":
+        squared = residual.square()
+        return 0.5 * scale**2 * squared / (squared + scale**2)
+    raise ValueError(f"robust must be 'huber' or 'geman_mcclure', got '{kind}'")
+
+
+def inside_bound(points: torch.Tensor, bound: torch.Tensor) -> torch.Tensor:
+    """(N,) bool: points within the (3, 2) scene box."""
+    return ((points >= bound[:, 0]) & (points <= bound[:, 1])).all(dim=-1)
+
+
+@dataclass(frozen=True, eq=False)
+class Linearisation:
+    """Residuals, weights and the Gauss-Newton system of a set of points at one pose.
+
+    Attributes:
+        residual: (N,) r_i, metres.
+        weight: (N,) robust weight times validity (0 for saturated or outside points).
+        cost: 0-d sum_i rho(r_i), an invalid point counting as rho(T) (as far as it can
+            be): so a step that brings points into the band lowers the cost.
+        hessian: (6, 6) J^T W J (float64).
+        gradient: (6,) J^T W r (float64).
+        valid: (N,) bool, points inside the bound and the band.
+    """
+
+    residual: torch.Tensor
+    weight: torch.Tensor
+    cost: torch.Tensor
+    hessian: torch.Tensor
+    gradient: torch.Tensor
+    valid: torch.Tensor
+
+
+def linearise(
+    field: SceneFieldLike,
+    points_cam: torch.Tensor,
+    pose: torch.Tensor,
+    config: SdfTrackerConfig,
+) -> Linearisation:
+    """Residuals r_i = T s(T q_i), their robust weights and J^T W J, J^T W r (module doc).
+
+    The field's parameters must not require gradients (only the points do).
+    """
+    truncation = field.truncation
+    with torch.enable_grad():
+        points = (points_cam @ pose[:3, :3].T + pose[:3, 3]).detach().requires_grad_(True)
+        sdf = field.query(points, with_rgb=False).sdf
+        (gradient,) = torch.autograd.grad(sdf.sum(), points)
+    sdf = sdf.detach()
+    points = points.detach()
+    residual = truncation * sdf
+    valid = (sdf.abs() < config.max_sdf) & inside_bound(points, field.bound)
+    weight = robust_weights(residual, config.robust_scale, config.robust) * valid
+    far = torch.full_like(residual, truncation)
+    cost = robust_cost(torch.where(valid, residual, far), config.robust_scale, config.robust)
+    jacobian = truncation * torch.cat((gradient, torch.cross(points, gradient, dim=-1)), dim=-1)
+    jacobian = jacobian.double()
+    weighted = jacobian * weight.double()[:, None]
+    return Linearisation(
+        residual=residual,
+        weight=weight,
+        cost=cost.sum(),
+        hessian=weighted.T @ jacobian,
+        gradient=weighted.T @ residual.double(),
+        valid=valid,
+    )
+
+
+def damped_step(system: Linearisation, damping: torch.Tensor) -> torch.Tensor:
+    """(6,) xi solving (H + lambda diag(H) + eps I) xi = -g (float64; never raises)."""
+    hessian = system.hessian
+    diagonal = torch.diagonal(hessian)
+    regular = 1e-9 * (1.0 + diagonal.abs().max())
+    damped = hessian + torch.diag(damping * diagonal + regular)
+    step, _ = torch.linalg.solve_ex(damped, -system.gradient[:, None])
+    return step[:, 0]
+
+
+def sdf_points(
+    view: View, count: int, generator: torch.Generator
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """A seeded subset of ``count`` sampleable pixels of ``view`` (with replacement),
+    back-projected: (count, 3) camera points q = d * D and their pixel indices."""
+    uniforms = torch.rand(count, generator=generator, device=view.depth.device)
+    pixels = pixels_from_uniforms(view, uniforms)
+    return view.directions[pixels] * view.depth[pixels, None], pixels
+
+
+def quality(system: Linearisation, config: SdfTrackerConfig) -> tuple[float, float]:
+    """(inlier fraction, robust RMS residual of the inliers in metres) at a linearisation."""
+    inliers = system.valid & (system.residual.abs() <= config.robust_scale)
+    count = int(inliers.sum())
+    fraction = count / max(len(system.residual), 1)
+    if count == 0:
+        return fraction, float("inf")
+    rms = float(system.residual[inliers].square().mean().sqrt())
+    return fraction, rms
+
+
+def track_sdf(
+    field: SceneFieldLike,
+    view: View,
+    initial_pose: torch.Tensor,
+    config: SdfTrackerConfig,
+    generator: torch.Generator,
+) -> TrackingResult:
+    """Pose of ``view`` by Levenberg-Marquardt on SDF residuals (module doc)."""
+    points_cam, _ = sdf_points(view, max(config.levels), generator)
+    pose = initial_pose.detach().clone()
+    iterations = 0
+    system = None
+    for count in config.levels:
+        level_points = points_cam[:count]
+        system = linearise(field, level_points, pose, config)
+        damping = torch.tensor(config.damping, dtype=torch.float64, device=pose.device)
+        for _ in range(config.iterations):
+            iterations += 1
+            step = damped_step(system, damping)
+            candidate = se3_exp(step.to(pose.dtype)) @ pose
+            trial = linearise(field, level_points, candidate, config)
+            better = bool(trial.cost <= system.cost)
+            if better:
+                pose, system = candidate, trial
+                damping = damping * 0.5
+            else:
+                damping = damping * 4.0
+            small = bool(
+                (step[:3].norm() < config.converged_translation)
+                & (step[3:].norm() < config.converged_rotation)
+            )
+            if small and better:
+                break
+    assert system is not None
+    inlier_fraction, residual = quality(system, config)
+    failed = inlier_fraction < config.min_inlier_fraction or residual > config.max_residual
+    return TrackingResult(
+        pose=pose,
+        loss=system.cost.detach(),
+        quality=TrackingQuality(
+            iterations=iterations,
+            inlier_fraction=inlier_fraction,
+            residual_m=residual,
+            failed=failed,
+        ),
+    )
+
+
+@dataclass(frozen=True)
+class SdfTracker:
+    """The SDF tracker behind the :class:`~eslam.slam.trackers.Tracker` protocol."""
+
+    config: SdfTrackerConfig
+
+    def track(
+        self,
+        field: SceneFieldLike,
+        view: View,
+        initial_pose: torch.Tensor,
+        generator: torch.Generator,
+    ) -> TrackingResult:
+        """Pose of ``view`` from ``initial_pose`` by :func:`track_sdf` (field frozen)."""
+        with frozen(field):  # type: ignore[arg-type]
+            return track_sdf(field, view, initial_pose, self.config, generator)
+
+
+@dataclass(frozen=True)
+class HybridTracker:
+    """``tracking.method: hybrid``: the SDF tracker, then a few iterations of the
+    rendering tracker from its pose (the paper's loss on top of a converged start).
+
+    A frame the SDF tracker reports as failed is not refined (it stays failed).
+    """
+
+    sdf: SdfTracker
+    render: RenderTracker
+
+    def track(
+        self,
+        field: SceneFieldLike,
+        view: View,
+        initial_pose: torch.Tensor,
+        generator: torch.Generator,
+    ) -> TrackingResult:
+        """SDF pose, refined by the rendering tracker unless the SDF tracking failed."""
+        coarse = self.sdf.track(field, view, initial_pose, generator)
+        if coarse.quality is not None and coarse.quality.failed:
+            return coarse
+        refined = self.render.track(field, view, coarse.pose, generator)
+        return TrackingResult(pose=refined.pose, loss=refined.loss, quality=coarse.quality)

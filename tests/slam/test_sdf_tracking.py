@@ -1,0 +1,154 @@
+"""The SDF tracker on an analytic scene with exact ground truth: convergence from small
+errors, failure reported (never a silent wrong pose) from large ones or wrong input."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+import torch
+from torch import nn
+
+from eslam.config import SdfTrackerConfig
+from eslam.geometry.pose import pose_distance, se3_exp
+from eslam.render.rays import camera_directions
+from eslam.slam.sdf_tracking import SdfTracker, robust_weights
+from eslam.slam.views import make_view
+from eslam.types import FieldOutput, Intrinsics
+
+CAMERA = Intrinsics(width=96, height=72, fx=70.0, fy=70.0, cx=47.5, cy=35.5)
+TRUNCATION = 0.06
+ROOM = (torch.tensor([0.0, 0.0, 0.0]), torch.tensor([4.0, 3.0, 2.5]))
+SPHERE = (torch.tensor([2.4, 1.7, 0.6]), 0.4)
+BOX = (torch.tensor([1.0, 0.6, 0.0]), torch.tensor([1.6, 1.2, 0.8]))
+
+
+def scene_sdf(points: torch.Tensor) -> torch.Tensor:
+    """Exact signed distance (m) of a room with a sphere and a box; > 0 in free space."""
+    low, high = ROOM
+    room = torch.minimum(points - low, high - points).min(dim=-1).values
+    centre, radius = SPHERE
+    sphere = (points - centre).norm(dim=-1) - radius
+    box_low, box_high = BOX
+    middle, half = (box_low + box_high) / 2, (box_high - box_low) / 2
+    q = (points - middle).abs() - half
+    box = q.clamp(min=0).norm(dim=-1) + q.max(dim=-1).values.clamp(max=0)
+    return torch.minimum(room, torch.minimum(sphere, box))
+
+
+class AnalyticField(nn.Module):
+    """A SceneFieldLike whose TSDF is the exact, truncated distance of :func:`scene_sdf`."""
+
+    truncation = TRUNCATION
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.register_buffer("bound", torch.tensor([[-0.2, 4.2], [-0.2, 3.2], [-0.2, 2.7]]))
+        self.beta = torch.tensor(10.0)
+
+    def query(self, points: torch.Tensor, with_rgb: bool = True) -> FieldOutput:
+        sdf = (scene_sdf(points.double()) / TRUNCATION).clamp(-1.0, 1.0).to(points.dtype)
+        return FieldOutput(sdf=sdf, rgb=None)
+
+
+def look_at(position, target) -> torch.Tensor:
+    """Camera-to-world pose (OpenCV axes) at ``position`` looking at ``target``, z up."""
+    position, target = np.asarray(position, float), np.asarray(target, float)
+    forward = (target - position) / np.linalg.norm(target - position)
+    right = np.cross(forward, [0.0, 0.0, 1.0])
+    right /= np.linalg.norm(right)
+    down = np.cross(forward, right)
+    pose = np.eye(4)
+    pose[:3, :3] = np.stack([right, down, forward], axis=1)
+    pose[:3, 3] = position
+    return torch.from_numpy(pose).float()
+
+
+def render_depth(pose: torch.Tensor) -> torch.Tensor:
+    """(H, W) depth along the optical axis by sphere tracing the exact distance."""
+    directions = camera_directions(CAMERA, dtype=torch.float64) @ pose[:3, :3].double().T
+    origin = pose[:3, 3].double()
+    t = torch.full((directions.shape[0],), 0.05, dtype=torch.float64)
+    for _ in range(200):
+        t = t + scene_sdf(origin + t[:, None] * directions)
+    return t.reshape(CAMERA.height, CAMERA.width).float()
+
+
+TRUE_POSE = look_at((3.3, 2.5, 1.5), (1.6, 1.0, 0.5))
+
+
+@pytest.fixture(scope="module")
+def view():
+    depth = render_depth(TRUE_POSE)
+    rgb = torch.zeros(CAMERA.height, CAMERA.width, 3)
+    return make_view(rgb, depth, camera_directions(CAMERA), border=2)
+
+
+def perturbed(translation_m: float, rotation_deg: float, seed: int) -> torch.Tensor:
+    """TRUE_POSE moved by ``translation_m`` and turned by ``rotation_deg`` about random axes."""
+    rng = np.random.default_rng(seed)
+    v = rng.normal(size=3)
+    w = rng.normal(size=3)
+    twist = np.concatenate(
+        [translation_m * v / np.linalg.norm(v), math.radians(rotation_deg) * w / np.linalg.norm(w)]
+    )
+    # rotate about the camera centre: pose' = exp(w) applied in the camera frame, then shift
+    delta = se3_exp(torch.tensor([0.0, 0.0, 0.0, *twist[3:]]))
+    pose = TRUE_POSE.double() @ delta
+    pose[:3, 3] += torch.from_numpy(twist[:3])
+    return pose.float()
+
+
+def test_robust_weights() -> None:
+    r = torch.tensor([0.0, 0.005, 0.02, -0.04])
+    assert torch.allclose(robust_weights(r, 0.01, "huber"), torch.tensor([1.0, 1.0, 0.5, 0.25]))
+    gm = robust_weights(r, 0.01, "geman_mcclure")
+    assert float(gm[0]) == pytest.approx(1.0) and bool((gm[1:].diff() < 0).all())
+    with pytest.raises(ValueError, match="robust"):
+        robust_weights(r, 0.01, "cauchy")
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_converges_from_3cm_3deg(view, seed: int) -> None:
+    tracker = SdfTracker(SdfTrackerConfig())
+    start = perturbed(0.03, 3.0, seed)
+    error_t, error_r = pose_distance(start, TRUE_POSE)
+    assert float(error_t) > 0.029 and math.degrees(float(error_r)) > 2.9
+    result = tracker.track(AnalyticField(), view, start, torch.Generator().manual_seed(seed))
+    error_t, error_r = pose_distance(result.pose, TRUE_POSE)
+    assert result.quality is not None and not result.quality.failed
+    assert float(error_t) < 0.003, f"{float(error_t) * 1000:.2f} mm"
+    assert math.degrees(float(error_r)) < 0.2
+    assert result.quality.inlier_fraction > 0.9 and result.quality.residual_m < 0.001
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2, 3])
+def test_from_10cm_10deg_converges_or_reports_failure(view, seed: int) -> None:
+    tracker = SdfTracker(SdfTrackerConfig())
+    result = tracker.track(
+        AnalyticField(), view, perturbed(0.10, 10.0, seed), torch.Generator().manual_seed(seed)
+    )
+    error_t, error_r = pose_distance(result.pose, TRUE_POSE)
+    assert result.quality is not None
+    if not result.quality.failed:  # never a silent wrong pose
+        assert float(error_t) < 0.005 and math.degrees(float(error_r)) < 0.3
+    else:  # a failed frame reports why
+        assert result.quality.inlier_fraction < 0.5 or result.quality.residual_m > 0.02
+
+
+def test_depth_that_fits_nothing_is_reported_as_failed() -> None:
+    # structureless depth (noise from 0.5 to 3 m): no pose puts it on the surfaces
+    noise = 0.5 + 2.5 * torch.rand(
+        CAMERA.height, CAMERA.width, generator=torch.Generator().manual_seed(0)
+    )
+    wrong = make_view(
+        torch.zeros(CAMERA.height, CAMERA.width, 3), noise, camera_directions(CAMERA), 2
+    )
+    config = dataclasses.replace(SdfTrackerConfig(), iterations=5)
+    result = SdfTracker(config).track(
+        AnalyticField(), wrong, TRUE_POSE, torch.Generator().manual_seed(0)
+    )
+    assert result.quality is not None and result.quality.failed
+    assert result.quality.inlier_fraction < 0.5
