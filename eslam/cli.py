@@ -84,14 +84,11 @@ def _command_inspect(args: argparse.Namespace) -> int:
 
 def _process_settings(config) -> None:
     """What a run asks of the process, set here (the process's owner), never by run_slam:
-    torch's CPU threads and INFO messages of the "eslam" logger (they go to log.txt)."""
-    import logging
-
+    torch's CPU threads (``threads=``)."""
     import torch
 
     if config.threads > 0:
         torch.set_num_threads(config.threads)
-    logging.getLogger("eslam").setLevel(logging.INFO)
 
 
 def _print_metrics(result) -> None:

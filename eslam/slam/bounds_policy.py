@@ -34,7 +34,7 @@ AUTO_BOUND_SEARCH = 30
 """Frames searched, from frame 0, for the first with valid depth to estimate the bound."""
 
 
-def first_pose(frame: Frame) -> torch.Tensor:
+def first_pose(frame: Frame, logger: logging.Logger = log) -> torch.Tensor:
     """(4, 4) float32 pose of frame 0: its ground truth (it fixes the world frame), else identity.
 
     Frame 0 without usable ground truth (none, or a NaN matrix, e.g. ScanNet's lost
@@ -45,7 +45,7 @@ def first_pose(frame: Frame) -> torch.Tensor:
     if frame.pose_gt is None:
         return torch.eye(4)
     if not np.all(np.isfinite(frame.pose_gt)):
-        log.warning(
+        logger.warning(
             "frame 0 has no usable ground-truth pose: the run starts at the identity, so "
             "its world frame differs from the ground truth's (a configured scene.bound "
             "may not fit; the ATE aligns the two)"
@@ -73,7 +73,9 @@ def check_depth_found(frames_without_depth: int, source: str) -> None:
         )
 
 
-def bound_from_frame(scene: SceneConfig, frame: Frame, pose: torch.Tensor) -> torch.Tensor:
+def bound_from_frame(
+    scene: SceneConfig, frame: Frame, pose: torch.Tensor, logger: logging.Logger = log
+) -> torch.Tensor:
     """(3, 2) float32 scene bound from the first frame with depth, seen from ``pose``
     (frame 0's: the camera has barely moved yet; growth covers what this misses).
 
@@ -92,7 +94,7 @@ def bound_from_frame(scene: SceneConfig, frame: Frame, pose: torch.Tensor) -> to
             f"the scene bound estimated from frame 0's depth is {widest:.1f} m wide, more "
             f"than scene.max_extent={scene.max_extent} m: set scene.bound or raise max_extent"
         )
-    log.info(
+    logger.info(
         "scene bound estimated from the first frame with depth (%d points, margin %.2f m): %s",
         len(points),
         scene.auto_bound_margin,
@@ -109,6 +111,7 @@ def cover_keyframe(
     scene: SceneConfig,
     generator: torch.Generator,
     warned: bool,
+    logger: logging.Logger = log,
 ) -> bool:
     """Grow ``field`` so it holds a keyframe's depth points, or warn (module doc).
 
@@ -120,6 +123,7 @@ def cover_keyframe(
         scene: the bound settings.
         generator: random source on the field's device (new plane features).
         warned: whether this run has already warned about points outside the bound.
+        logger: where to report growth and the warning (the run's log).
 
     Returns:
         The new ``warned`` flag (True once a warning was logged).
@@ -132,7 +136,7 @@ def cover_keyframe(
     widest = float((coverage.required[:, 1] - coverage.required[:, 0]).max())
     if scene.grow and widest <= scene.max_extent:
         field.grow(coverage.required, generator)
-        log.info(
+        logger.info(
             "scene bound grown (%.1f%% of a keyframe's depth points were outside): %s -> %s",
             100.0 * coverage.fraction_outside,
             _format(old),
@@ -145,7 +149,7 @@ def cover_keyframe(
             if not scene.grow
             else f"growing would pass scene.max_extent={scene.max_extent} m ({widest:.1f} m)"
         )
-        log.warning(
+        logger.warning(
             "%.1f%% of a keyframe's depth points lie outside the scene bound %s and read "
             "its border features (%s; warned once): widen scene.bound or set scene.grow=true",
             100.0 * coverage.fraction_outside,

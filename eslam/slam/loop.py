@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import contextlib
 import logging
-import threading
 import time
 from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
@@ -98,6 +97,7 @@ class RunLoop:
         device: the compute device.
         observers: told about every frame and mapping call.
         source: the input's name, for messages.
+        logger: the run's log (warnings about frames, bound estimates and growth).
     """
 
     def __init__(
@@ -107,12 +107,14 @@ class RunLoop:
         device: torch.device,
         observers: RunObserver,
         source: str,
+        logger: logging.Logger = log,
     ) -> None:
         self.config = config
         self.state = state
         self.device = device
         self.observers = observers
         self.source = source
+        self.log = logger
         self.tracker = make_tracker(config)
         self.schedule = KeyframeSchedule(config.mapping.every)
         self.mapping = MappingSettings(config.mapping, config.render, config.loss)
@@ -175,7 +177,7 @@ class RunLoop:
         started = device_clock(self.device)
         has_depth = bool(frame.valid_depth.any())
         if not has_depth:
-            log.warning(
+            self.log.warning(
                 "frame %d (timestamp %.6f) has no valid depth: skipped (pose predicted, "
                 "not tracked or mapped)",
                 index,
@@ -184,7 +186,7 @@ class RunLoop:
         tracked = False
         quality = None
         if index == 0:
-            pose = first_pose(frame).to(self.device)
+            pose = first_pose(frame, self.log).to(self.device)
         else:
             pose = predict_pose(state.trajectory.poses, self.config.tracking.constant_velocity)
             if has_depth and state.field is not None and len(state.keyframes) > 0:
@@ -198,7 +200,7 @@ class RunLoop:
                         pose = result.pose
         failed = quality is not None and quality.failed
         if failed:
-            log.warning(
+            self.log.warning(
                 "frame %d (timestamp %.6f): tracking failed (%.0f%% inliers, residual %.1f mm):"
                 " the motion model's pose is kept and the frame is no keyframe",
                 index,
@@ -236,7 +238,7 @@ class RunLoop:
             check_depth_found(self._frames_without_depth, self.source)
             return
         first = self.state.trajectory.poses[0] if len(self.state.trajectory) else pose
-        bound = bound_from_frame(self.config.scene, frame, first)
+        bound = bound_from_frame(self.config.scene, frame, first, self.log)
         self.state.field = new_field(self.config, bound, self.device)
 
     def map_frame(self, frame: Frame, index: int) -> None:
@@ -260,6 +262,7 @@ class RunLoop:
             self.config.scene,
             state.generator,
             state.bound_warned,
+            self.log,
         )
         window = state.window.select(store, current, state.generator)
         views = [
@@ -326,35 +329,24 @@ def preflight(sequence: RGBDSequence) -> None:
         sequence[len(sequence) - 1]
 
 
-class _ThreadFilter(logging.Filter):
-    """Pass only records logged by one thread (the run's), so concurrent runs keep
-    their own log files."""
-
-    def __init__(self) -> None:
-        super().__init__()
-        self.thread = threading.get_ident()
-
-    def filter(self, record: logging.LogRecord) -> bool:
-        return record.thread == self.thread
-
-
 @contextlib.contextmanager
-def run_log(path: Path) -> Iterator[logging.Handler]:
-    """Append the "eslam" logger's records from this thread to ``path`` while inside;
-    yield the file handler (the run's own lines are written to it directly).
+def run_log(path: Path) -> Iterator[logging.Logger]:
+    """The run's logger while inside: INFO and above appended to ``path`` (log.txt).
 
-    The logger's level is left alone: warnings always reach the file, the library's
-    INFO messages (bound estimates and growth) when the level allows (the CLI sets
-    INFO; a script chooses its own).
+    A private logger (not in logging's registry, so no global state changes) whose
+    parent is the "eslam" logger: its records also reach the handlers a script attached
+    there, and warnings reach stderr when there are none. Concurrent runs each have
+    their own.
     """
     handler = logging.FileHandler(path, mode="a", encoding="utf-8")
     handler.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(message)s"))
-    handler.addFilter(_ThreadFilter())
-    log.addHandler(handler)
+    logger = logging.Logger("eslam.run", logging.INFO)
+    logger.parent = log
+    logger.addHandler(handler)
     try:
-        yield handler
+        yield logger
     finally:
-        log.removeHandler(handler)
+        logger.removeHandler(handler)
         handler.close()
 
 
@@ -410,7 +402,7 @@ def run_slam(
     source, sequence = _open_input(config, source)
     intrinsics = source.intrinsics if source is not None else sequence.intrinsics  # type: ignore[union-attr]
     run = RunDirectory(Path(run_dir)) if resume else prepare_run_directory(run_dir, overwrite)
-    with run_log(run.log) as log_file:
+    with run_log(run.log) as run_logger:
         if resume:
             state = load_state(run.map, config, device)
         else:
@@ -425,9 +417,9 @@ def run_slam(
         memory.start()
         writer = RunWriter(run, config, memory)
         everyone = Observers(
-            [writer, LogObserver(log_file), ProgressObserver(config.output.progress), *observers]
+            [writer, LogObserver(run_logger), ProgressObserver(config.output.progress), *observers]
         )
-        loop = RunLoop(config, state, device, everyone, source.name)
+        loop = RunLoop(config, state, device, everyone, source.name, run_logger)
         if resume and not state.last_mapped and isinstance(source, SequenceSource):
             loop.last_frame = source.frame(state.next_frame - 1)
         everyone.on_start(RunStart(config, run.root, state, device, source.name, remaining, resume))

@@ -185,15 +185,11 @@ class Observers(RunObserverBase):
 
 
 class LogObserver(RunObserverBase):
-    """The run's own log lines (start, mapping calls, end, failure), always at INFO.
+    """The run's own log lines (start, mapping calls, end, failure) on the run's logger
+    (:func:`eslam.slam.loop.run_log`: log.txt at INFO, whatever level "eslam" has)."""
 
-    They go to ``handler`` (the run's log.txt) through a private logger, so they are
-    written whatever level the "eslam" logger has, and no global logging state changes.
-    """
-
-    def __init__(self, handler: logging.Handler) -> None:
-        self.log = logging.Logger("eslam.run", logging.INFO)  # not in the global registry
-        self.log.addHandler(handler)
+    def __init__(self, logger: logging.Logger) -> None:
+        self.log = logger
 
     def on_start(self, start: RunStart) -> None:
         if start.resumed:

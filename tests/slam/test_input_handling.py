@@ -68,7 +68,7 @@ def test_frames_without_depth_are_skipped_with_a_warning(tmp_path: Path) -> None
     log = (tmp_path / "run" / "log.txt").read_text()
     assert "frame 0 (timestamp 0.000000) has no valid depth: skipped" in log
     assert "frame 4 (timestamp 4.000000) has no valid depth: skipped" in log
-    assert "mapped frame 1: window [0]" in log  # the first map moved to the first frame with depth
+    assert "mapped frame 1: window [1]" in log  # the first map moved to the first frame with depth
     assert np.isfinite(result.poses).all()
     # a tracker that never moves scores static_ate_cm; frames 0 and 4 keep predicted poses
     assert result.metrics["ate_rmse_cm"] < 0.3 * static_ate_cm([f.pose_gt for f in frames])
