@@ -37,7 +37,7 @@ from eslam.errors import InputError
 from eslam.types import Frame, Intrinsics
 
 REPLICA_DEPTH_SCALE = 6553.5
-"""Replica depth PNG units per metre (NICE-SLAM's renderings; method.md section 9)."""
+"""Replica depth PNG units per metre (NICE-SLAM's renderings; docs/method.md section 9)."""
 
 _FRAME_RE = re.compile(r"^frame(\d+)\.(?:jpg|jpeg|png)$", re.IGNORECASE)
 _DEPTH_RE = re.compile(r"^depth(\d+)\.png$", re.IGNORECASE)

@@ -45,14 +45,14 @@ from eslam.errors import InputError
 from eslam.types import Frame, Intrinsics
 
 SCANNET_DEPTH_SCALE = 1000.0
-"""ScanNet depth PNG units per metre (millimetres; method.md section 9)."""
+"""ScanNet depth PNG units per metre (millimetres; docs/method.md section 9)."""
 
 SCANNET_CROP = 10
 """Pixels cropped on every border by default (release config ``cam.crop_edge``)."""
 
 RELEASE_DEPTH_INTRINSICS = (577.590698, 578.729797, 318.905426, 242.683609)
 """fx, fy, cx, cy of the ESLAM release's ScanNet config (scene0000_00's depth camera,
-method.md section 9), used when a scene has no ``intrinsic/intrinsic_depth.txt``."""
+docs/method.md section 9), used when a scene has no ``intrinsic/intrinsic_depth.txt``."""
 
 PRINCIPAL_POINT_BAND = 0.25
 """The principal point must lie within this fraction of the image size from the image

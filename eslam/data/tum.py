@@ -90,7 +90,7 @@ class TUMCamera:
 
 TUM_CAMERAS = {
     # TUM RGB-D "camera calibration" page; the same numbers as the ESLAM release's
-    # configs/TUM_RGBD/freiburg{1_desk,2_xyz,3_office}.yaml (method.md section 9).
+    # configs/TUM_RGBD/freiburg{1_desk,2_xyz,3_office}.yaml (docs/method.md section 9).
     "fr1": TUMCamera(
         "fr1",
         Intrinsics(640, 480, 517.3, 516.5, 318.6, 255.3),

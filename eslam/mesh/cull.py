@@ -1,4 +1,4 @@
-"""Mesh culling for evaluation: keep what the cameras saw (method.md section 6).
+"""Mesh culling for evaluation: keep what the cameras saw (docs/method.md section 6).
 
 Two protocols, applied alike to a reconstruction (with its estimated poses) and to the
 ground-truth mesh (with the ground-truth poses):

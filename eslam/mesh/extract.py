@@ -1,4 +1,4 @@
-"""Mesh extraction: marching cubes of the learned TSDF, block by block (method.md section 6).
+"""Mesh extraction: marching cubes of the learned TSDF, block by block (docs/method.md section 6).
 
 The grid of step ``resolution`` over the field's bound is never held whole. It is cut
 into blocks (:mod:`eslam.mesh.grid`); per block:
@@ -238,7 +238,7 @@ def extract_mesh(
 
     Args:
         field: the field (any device); its ``bound`` is the box meshed.
-        resolution: grid step, metres (method.md section 6: 0.01 Replica/TUM, 0.02 ScanNet).
+        resolution: grid step, metres (docs/method.md section 6: 0.01 Replica/TUM, 0.02 ScanNet).
         views: observed space; None meshes the whole bound (phantom surfaces possible).
         options: block size, coarse step and query chunk.
 

@@ -1,4 +1,4 @@
-"""`eslam eval RUN_DIR`: score a finished run (method.md section 6), write report.md.
+"""`eslam eval RUN_DIR`: score a finished run (docs/method.md section 6), write report.md.
 
 1. ATE of trajectory.txt against trajectory_gt.txt (all statistics, SE(3) Umeyama).
 2. With a ground-truth mesh: cull the run's mesh (estimated poses) and the GT mesh
