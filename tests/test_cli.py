@@ -13,9 +13,10 @@ import trimesh
 from scipy.spatial.transform import Rotation
 
 from eslam.cli import EXIT_USER_ERROR, main
-from eslam.data.mesh_io import TriangleMesh, read_mesh_ply, write_mesh_ply
 from eslam.data.replica import ReplicaSequence
+from eslam.io.mesh_files import read_mesh_ply, write_mesh_ply
 from eslam.io.trajectory import write_tum_trajectory
+from eslam.types import TriangleMesh
 
 
 def _one_line_error(capsys: pytest.CaptureFixture[str]) -> str:

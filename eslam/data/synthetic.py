@@ -20,7 +20,6 @@ from pathlib import Path
 import numpy as np
 
 from eslam.atomic import atomic_directory, write_text
-from eslam.data.mesh_io import write_mesh_ply
 from eslam.data.replica import REPLICA_DEPTH_SCALE, write_replica_sequence
 from eslam.data.synthetic_materials import random_material
 from eslam.data.synthetic_mesh import scene_mesh
@@ -34,6 +33,7 @@ from eslam.data.synthetic_scene import (
     render_view,
 )
 from eslam.errors import InputError
+from eslam.io.mesh_files import write_mesh_ply
 from eslam.types import Frame, Intrinsics
 
 FPS = 30.0

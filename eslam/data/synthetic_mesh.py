@@ -3,7 +3,7 @@
 Primitives (:mod:`eslam.data.synthetic_scene`) build their triangulated surfaces from
 the helpers here (:class:`Surface`, grids, rectangles, box faces, circle segment
 counts); :func:`scene_mesh` gathers them into one vertex-coloured
-:class:`~eslam.data.mesh_io.TriangleMesh` in the world frame. Curved
+:class:`~eslam.types.TriangleMesh` in the world frame. Curved
 surfaces stay within MESH_TOLERANCE of the exact ones.
 """
 
@@ -15,8 +15,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from eslam.data.mesh_io import TriangleMesh
 from eslam.data.synthetic_materials import shading
+from eslam.types import TriangleMesh
 
 if TYPE_CHECKING:
     from eslam.data.synthetic_scene import Scene

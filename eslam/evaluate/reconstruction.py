@@ -23,9 +23,9 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from eslam.data.mesh_io import TriangleMesh
 from eslam.evaluate.sampling import sample_surface
 from eslam.evaluate.surface_distance import build_surface_index, distance_to_surface
+from eslam.types import TriangleMesh
 
 RELEASE_SAMPLES = 450_000
 """Points sampled per mesh (ESLAM release, eval_recon.py ``calc_3d_metric(num_points=450000)``)."""

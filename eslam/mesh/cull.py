@@ -34,10 +34,9 @@ import numpy as np
 import torch
 
 from eslam.config.device import resolve_device
-from eslam.data.mesh_io import TriangleMesh
 from eslam.errors import ConfigError
 from eslam.mesh.subdivide import subdivide_long_edges
-from eslam.types import Intrinsics
+from eslam.types import Intrinsics, TriangleMesh
 
 CullProtocol = Literal["eslam", "nice"]
 

@@ -26,7 +26,6 @@ from typing import Protocol
 import numpy as np
 import torch
 
-from eslam.data.mesh_io import TriangleMesh
 from eslam.mesh.grid import (
     ExtractionGrid,
     all_corners,
@@ -44,7 +43,7 @@ from eslam.mesh.observed import (
     views_seeing_boxes,
 )
 from eslam.mesh.weld import weld_vertices
-from eslam.types import FieldOutput
+from eslam.types import FieldOutput, TriangleMesh
 
 __all__ = ["ExtractOptions", "ObservedViews", "TSDFField", "extract_mesh", "observed_mask"]
 
