@@ -43,16 +43,17 @@ from PIL import Image
 
 from eslam.atomic import write_text, write_with
 from eslam.config import DataConfig
-from eslam.data.base import (
-    FileSequence,
-    FrameReading,
-    check_pose,
-    require_dir,
-    require_file,
-)
+from eslam.data.base import FileSequence, FrameReading, require_dir, require_file
 from eslam.data.transform import transform_from_options
 from eslam.errors import InputError
-from eslam.geometry.pose import pose_from_quaternion_translation, quaternion_translation_from_pose
+from eslam.geometry.pose import quaternion_translation_from_pose
+from eslam.io.pose_files import (
+    MATRIX_COLUMNS,
+    TUM_COLUMNS,
+    matrix_poses,
+    read_pose_table,
+    tum_poses,
+)
 from eslam.types import Frame, Intrinsics
 
 INTRINSICS_FILE = "intrinsics.yaml"
@@ -135,30 +136,6 @@ def _order(stems: Iterable[str]) -> tuple[list[str], np.ndarray]:
     return ordered, np.arange(len(ordered), dtype=np.float64)
 
 
-def _pose_lines(path: Path) -> list[tuple[int, list[float]]]:
-    """(line number, values) of every pose line; all lines hold 8 or all hold 16 values."""
-    lines = []
-    for number, line in enumerate(path.read_text(encoding="utf-8").splitlines(), start=1):
-        text = line.strip()
-        if not text or text.startswith("#"):
-            continue
-        try:
-            values = [float(value) for value in text.replace(",", " ").split()]
-        except ValueError:
-            raise InputError(path, f"line {number}: not a list of numbers") from None
-        if len(values) not in (8, 16) or (lines and len(values) != len(lines[0][1])):
-            expected = len(lines[0][1]) if lines else "8 or 16"
-            raise InputError(
-                path,
-                f"line {number}: expected {expected} numbers, got {len(values)}",
-                "one 'timestamp tx ty tz qx qy qz qw' or one 4x4 row-major pose per line",
-            )
-        lines.append((number, values))
-    if not lines:
-        raise InputError(path, "holds no poses")
-    return lines
-
-
 def read_folder_poses(path: Path, timestamps: np.ndarray, numeric_stems: bool) -> np.ndarray:
     """(N, 4, 4) float64 poses of the N frames with ``timestamps``; NaN where none matches.
 
@@ -172,35 +149,26 @@ def read_folder_poses(path: Path, timestamps: np.ndarray, numeric_stems: bool) -
         InputError: bad lines, non-rigid or non-finite poses, a 4x4 file whose line count
             is not the frame count, or a TUM-style file that matches no frame.
     """
-    lines = _pose_lines(path)
-    poses = np.full((len(timestamps), 4, 4), np.nan)
-    if len(lines[0][1]) == 16:
-        if len(lines) != len(timestamps):
+    table = read_pose_table(path, (TUM_COLUMNS, MATRIX_COLUMNS))
+    if table.columns == MATRIX_COLUMNS:
+        if len(table.lines) != len(timestamps):
             raise InputError(
                 path,
-                f"has {len(lines)} 4x4 poses for {len(timestamps)} frames",
+                f"has {len(table.lines)} 4x4 poses for {len(timestamps)} frames",
                 "write one pose per frame, in frame order (or use timestamped TUM lines)",
             )
-        for row, (number, values) in enumerate(lines):
-            pose = np.array(values).reshape(4, 4)
-            poses[row] = check_pose(pose, path, f"line {number}")
-        return poses
+        return matrix_poses(table)
     if not numeric_stems:
         raise InputError(
             path,
             "timestamped pose lines need image files named by number or timestamp",
             "rename the images (e.g. 000123.png) or write one 4x4 pose per line",
         )
-    for number, values in lines:
-        q = torch.tensor(values[4:8], dtype=torch.float64)
-        if not torch.all(torch.isfinite(q)) or float(q.norm()) < 0.5:
-            raise InputError(
-                path, f"line {number}: quaternion {values[4:8]} is not a rotation (norm ~1)"
-            )
-        pose = pose_from_quaternion_translation(q, torch.tensor(values[1:4], dtype=torch.float64))
-        pose = check_pose(pose.numpy(), path, f"line {number}")
-        nearest = int(np.argmin(np.abs(timestamps - values[0])))
-        if abs(timestamps[nearest] - values[0]) <= TIMESTAMP_TOLERANCE:
+    times, tum = tum_poses(table)
+    poses = np.full((len(timestamps), 4, 4), np.nan)
+    for time, pose in zip(times, tum, strict=True):
+        nearest = int(np.argmin(np.abs(timestamps - time)))
+        if abs(timestamps[nearest] - time) <= TIMESTAMP_TOLERANCE:
             poses[nearest] = pose
     if np.isnan(poses).all():
         raise InputError(

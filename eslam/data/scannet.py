@@ -33,15 +33,10 @@ from PIL import Image, UnidentifiedImageError
 
 from eslam.atomic import write_text, write_with
 from eslam.config import DataConfig
-from eslam.data.base import (
-    FileSequence,
-    FrameReading,
-    check_pose,
-    require_dir,
-    require_file,
-)
+from eslam.data.base import FileSequence, FrameReading, require_dir
 from eslam.data.transform import transform_from_options
 from eslam.errors import InputError
+from eslam.io.pose_files import check_pose, read_matrix_file
 from eslam.types import Frame, Intrinsics
 
 SCANNET_DEPTH_SCALE = 1000.0
@@ -61,23 +56,6 @@ centre; otherwise the intrinsics are for another image size (e.g. the colour cam
 _COLOUR_RE = re.compile(r"^(\d+)\.(?:jpg|jpeg|png)$", re.IGNORECASE)
 _DEPTH_RE = re.compile(r"^(\d+)\.png$", re.IGNORECASE)
 _POSE_RE = re.compile(r"^(\d+)\.txt$", re.IGNORECASE)
-
-
-def read_matrix_file(path: Path, what: str) -> np.ndarray:
-    """Read a whitespace-separated 4x4 matrix (ScanNet's intrinsics and poses) as float64.
-
-    Non-finite entries (``-inf``, ``nan``) are kept; the caller decides what they mean.
-    """
-    require_file(path, what)
-    try:
-        values = [float(value) for value in path.read_text(encoding="utf-8").split()]
-    except ValueError:
-        raise InputError(path, "not a list of numbers", f"expected {what}") from None
-    except UnicodeDecodeError:
-        raise InputError(path, "not a text file", f"expected {what}") from None
-    if len(values) != 16:
-        raise InputError(path, f"expected 16 numbers (a 4x4 matrix), got {len(values)}")
-    return np.array(values, dtype=np.float64).reshape(4, 4)
 
 
 def fitting_intrinsics(

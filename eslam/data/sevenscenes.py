@@ -38,17 +38,12 @@ from PIL import Image
 
 from eslam.atomic import write_text, write_with
 from eslam.config import DataConfig
-from eslam.data.base import (
-    FileSequence,
-    FrameReading,
-    check_pose,
-    require_dir,
-    require_file,
-)
+from eslam.data.base import FileSequence, FrameReading, require_dir
 from eslam.data.scannet import fitting_intrinsics, image_size
 from eslam.data.transform import transform_from_options
 from eslam.errors import InputError
 from eslam.geometry.rotation import orthonormalize_rotation
+from eslam.io.pose_files import check_pose, read_matrix_file
 from eslam.types import Frame, Intrinsics
 
 SEVENSCENES_DEPTH_SCALE = 1000.0
@@ -72,13 +67,7 @@ _SEQUENCE_RE = re.compile(r"^seq-\d+$", re.IGNORECASE)
 
 def read_intrinsics_file(path: Path, size: tuple[int, int]) -> Intrinsics:
     """Read ``camera-intrinsics.txt`` (3x3 K) for images of ``size`` (width, height)."""
-    try:
-        values = [float(value) for value in path.read_text(encoding="utf-8").split()]
-    except (ValueError, UnicodeDecodeError):
-        raise InputError(path, "not a list of numbers", "expected a 3x3 camera matrix") from None
-    if len(values) != 9:
-        raise InputError(path, f"expected 9 numbers (a 3x3 camera matrix), got {len(values)}")
-    k = np.array(values).reshape(3, 3)
+    k = read_matrix_file(path, "a 3x3 camera matrix", (3, 3))
     return fitting_intrinsics(path, (k[0, 0], k[1, 1], k[0, 2], k[1, 2]), size)
 
 
@@ -109,14 +98,7 @@ def read_sevenscenes_pose(path: Path) -> np.ndarray:
         InputError: not 16 numbers, non-finite, or a rotation off by more than
             :data:`ROTATION_TOLERANCE`.
     """
-    require_file(path, "a 4x4 camera-to-world pose")
-    try:
-        values = [float(value) for value in path.read_text(encoding="utf-8").split()]
-    except (ValueError, UnicodeDecodeError):
-        raise InputError(path, "not a list of numbers", "expected a 4x4 pose") from None
-    if len(values) != 16:
-        raise InputError(path, f"expected 16 numbers (a 4x4 pose), got {len(values)}")
-    pose = np.array(values, dtype=np.float64).reshape(4, 4)
+    pose = read_matrix_file(path, "a 4x4 camera-to-world pose")
     if not np.all(np.isfinite(pose)):
         check_pose(pose, path, "pose")  # raises the shared non-finite error
     error = rotation_error(pose[:3, :3])

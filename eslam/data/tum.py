@@ -41,21 +41,12 @@ from PIL import Image
 
 from eslam.atomic import write_text, write_with
 from eslam.config import DataConfig
-from eslam.data.base import (
-    FileSequence,
-    FrameReading,
-    check_pose,
-    require_dir,
-    require_file,
-)
+from eslam.data.base import FileSequence, FrameReading, require_dir, require_file
 from eslam.data.transform import transform_from_options
 from eslam.data.undistort import PlumbBob, Undistorter, distort_map, remap_bilinear, remap_nearest
 from eslam.errors import ConfigError, InputError
-from eslam.geometry.pose import (
-    interpolate_pose,
-    pose_from_quaternion_translation,
-    quaternion_translation_from_pose,
-)
+from eslam.geometry.pose import interpolate_pose, quaternion_translation_from_pose
+from eslam.io.pose_files import TUM_COLUMNS, read_pose_table, text_lines, tum_poses
 from eslam.types import Frame, Intrinsics
 
 TUM_DEPTH_SCALE = 5000.0
@@ -130,18 +121,6 @@ def camera_for(root: Path, name: str | None) -> TUMCamera:
     return TUM_CAMERAS[f"fr{match.group(1)}"]
 
 
-def _data_lines(path: Path) -> Iterable[tuple[int, list[str]]]:
-    """(line number, fields) of every line that is neither blank nor a '#' comment."""
-    try:
-        text = path.read_text(encoding="utf-8")
-    except UnicodeDecodeError as error:
-        raise InputError(path, f"not a text file ({error})") from None
-    for number, line in enumerate(text.splitlines(), start=1):
-        stripped = line.strip()
-        if stripped and not stripped.startswith("#"):
-            yield number, stripped.split()
-
-
 def _timestamp(path: Path, number: int, text: str) -> float:
     try:
         value = float(text)
@@ -172,7 +151,8 @@ def read_file_list(path: Path, what: str) -> FileList:
     require_file(path, f"the TUM list of {what} ('timestamp filename' per line)")
     times: list[float] = []
     paths: list[Path] = []
-    for number, fields in _data_lines(path):
+    for number, text in text_lines(path):
+        fields = text.split()
         if len(fields) != 2:
             raise InputError(
                 path, f"line {number}: expected 'timestamp filename', got {len(fields)} fields"
@@ -200,47 +180,15 @@ class Groundtruth:
 
 
 def read_groundtruth(path: Path) -> Groundtruth:
-    """Read 'timestamp tx ty tz qx qy qz qw' lines; each pose is checked finite and rigid.
+    """Read 'timestamp tx ty tz qx qy qz qw' lines (:mod:`eslam.io.pose_files`).
 
     Raises:
         InputError: naming the line of a wrong field count, a non-number, a non-finite
             value or a quaternion whose norm is not 1 within QUATERNION_NORM_TOLERANCE.
     """
-    times: list[float] = []
-    vectors: list[list[float]] = []
-    numbers: list[int] = []
-    for number, fields in _data_lines(path):
-        if len(fields) != 8:
-            raise InputError(
-                path,
-                f"line {number}: expected 'timestamp tx ty tz qx qy qz qw', "
-                f"got {len(fields)} fields",
-            )
-        times.append(_timestamp(path, number, fields[0]))
-        try:
-            values = [float(field) for field in fields[1:]]
-        except ValueError:
-            raise InputError(path, f"line {number}: not a list of numbers") from None
-        if not all(math.isfinite(value) for value in values):
-            raise InputError(
-                path, f"line {number}: pose has non-finite values (nan or inf)", "fix that line"
-            )
-        norm = math.sqrt(sum(value * value for value in values[3:]))
-        if abs(norm - 1.0) > QUATERNION_NORM_TOLERANCE:
-            raise InputError(
-                path,
-                f"line {number}: quaternion qx qy qz qw has norm {norm:.4g}, not 1",
-                "groundtruth.txt needs unit quaternions (scalar last)",
-            )
-        vectors.append(values)
-        numbers.append(number)
-    if not times:
-        raise InputError(path, "holds no poses")
-    vector = torch.tensor(vectors, dtype=torch.float64)
-    poses = pose_from_quaternion_translation(vector[:, 3:], vector[:, :3]).numpy()
-    for number, pose in zip(numbers, poses, strict=True):  # rigid by construction: a guard
-        check_pose(pose, path, f"line {number}")
-    return Groundtruth(path, np.array(times, dtype=np.float64), poses)
+    table = read_pose_table(path, (TUM_COLUMNS,))
+    times, poses = tum_poses(table, quaternion_tolerance=QUATERNION_NORM_TOLERANCE)
+    return Groundtruth(path, times, poses)
 
 
 def nearest(times: np.ndarray, queries: np.ndarray) -> np.ndarray:

@@ -375,7 +375,7 @@ def test_groundtruth_wrong_field_count(sequence_dir: Path) -> None:
     path = sequence_dir / "groundtruth.txt"
     path.write_text(path.read_text() + "1305031453.0 1 2 3\n")
     count = len(path.read_text().splitlines())
-    _expect_error(sequence_dir, "groundtruth.txt", f"line {count}: expected 'timestamp tx ty tz")
+    _expect_error(sequence_dir, "groundtruth.txt", f"line {count}: expected 8 numbers, got 4")
 
 
 def test_groundtruth_not_numbers(sequence_dir: Path) -> None:
