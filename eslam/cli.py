@@ -55,7 +55,7 @@ def _positive_int(text: str) -> int:
 
 
 def _command_synth(args: argparse.Namespace) -> int:
-    from eslam.data.synthetic import SynthConfig, write_synthetic_sequence
+    from eslam.synthetic import SynthConfig, write_synthetic_sequence
 
     width, height = args.size
     config = SynthConfig(
@@ -336,7 +336,7 @@ def build_parser() -> argparse.ArgumentParser:
     commands = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     commands.required = True
 
-    from eslam.data.synthetic import SCENES, SynthConfig
+    from eslam.synthetic import SCENES, SynthConfig
 
     defaults = SynthConfig()
     synth = commands.add_parser(

@@ -11,8 +11,6 @@ from PIL import Image
 
 from eslam.config import DataConfig
 from eslam.data import open_sequence
-from eslam.data.synthetic import FPS, SynthConfig, build_scene, camera_trajectory
-from eslam.data.synthetic_scene import Scene, render_frame
 from eslam.data.transform import ImageTransform
 from eslam.data.tum import (
     DEPTH_DELAY,
@@ -29,6 +27,7 @@ from eslam.data.tum import (
     write_tum_sequence,
 )
 from eslam.errors import ConfigError, InputError
+from eslam.synthetic import FPS, Scene, SynthConfig, build_scene, camera_trajectory, render_frame
 from eslam.types import Frame
 
 FRAMES = 3
