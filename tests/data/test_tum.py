@@ -13,21 +13,19 @@ from eslam.config import DataConfig
 from eslam.data import open_sequence
 from eslam.data.transform import ImageTransform
 from eslam.data.tum import (
-    DEPTH_DELAY,
     TUM_CAMERAS,
     TUM_CROP,
     TUM_DEPTH_SCALE,
-    TUM_EPOCH,
     TUM_RESIZE,
     TUMSequence,
     associate,
     camera_for,
     nearest,
     read_groundtruth,
-    write_tum_sequence,
 )
 from eslam.errors import ConfigError, InputError
 from eslam.synthetic import FPS, Scene, SynthConfig, build_scene, camera_trajectory, render_frame
+from eslam.testing.tum import DEPTH_DELAY, TUM_EPOCH, write_tum_sequence
 from eslam.types import Frame
 
 FRAMES = 3
