@@ -10,6 +10,7 @@ import argparse
 import os
 import signal
 import sys
+import textwrap
 import threading
 from collections.abc import Sequence
 from pathlib import Path
@@ -54,8 +55,42 @@ def _positive_int(text: str) -> int:
     return value
 
 
+SETTINGS_WIDTH = 100
+"""Line width of the settings list under ``eslam run --help``."""
+
+
+def settings_epilog() -> str:
+    """Every config key as ``section.key (default): docstring``, read off the dataclasses.
+
+    The text under ``eslam run --help``: built from :func:`eslam.config.config_help`
+    (the field docstrings of :class:`eslam.config.ESLAMConfig`), never written by hand.
+    """
+    from eslam.config import config_help
+
+    def fill(text: str, indent: str = "", more: str = "") -> str:
+        return textwrap.fill(
+            " ".join(text.split()),
+            SETTINGS_WIDTH,
+            initial_indent=indent,
+            subsequent_indent=more,
+            break_long_words=False,
+            break_on_hyphens=False,
+        )
+
+    lines = [
+        fill(
+            "settings (key=value after CONFIG): key (default): what it does. The defaults "
+            "are the schema's; CONFIG and the files it inherits from (configs/base.yaml) "
+            "change some of them."
+        )
+    ]
+    for row in config_help():
+        lines.append(fill(f"{row.key} ({row.default}): {row.doc}", "  ", "      "))
+    return "\n".join(lines)
+
+
 def _command_synth(args: argparse.Namespace) -> int:
-    from eslam.data.synthetic import SynthConfig, write_synthetic_sequence
+    from eslam.synthetic import SynthConfig, write_synthetic_sequence
 
     width, height = args.size
     config = SynthConfig(
@@ -333,7 +368,7 @@ def build_parser() -> argparse.ArgumentParser:
     commands = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     commands.required = True
 
-    from eslam.data.synthetic import SCENES, SynthConfig
+    from eslam.synthetic import SCENES, SynthConfig
 
     defaults = SynthConfig()
     synth = commands.add_parser(
@@ -386,11 +421,14 @@ def build_parser() -> argparse.ArgumentParser:
     run = commands.add_parser(
         "run",
         help="run ESLAM on a sequence and write a run folder",
-        description=(
+        description=textwrap.fill(
             "Track every frame and map every k-th; write config.yaml, trajectory.txt "
             "(TUM), trajectory_gt.txt, map.pt, mesh.ply, metrics.json and timings.json. "
-            "Settings are `key.sub=value` overrides of CONFIG (see configs/base.yaml)."
+            "Settings are `key.sub=value` overrides of CONFIG (listed below).",
+            SETTINGS_WIDTH,
         ),
+        epilog=settings_epilog(),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     run.add_argument(
         "config", metavar="CONFIG", help="YAML config (e.g. configs/replica/room0.yaml)"

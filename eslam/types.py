@@ -122,6 +122,21 @@ class Frame:
 
 
 @dataclass(frozen=True, eq=False)
+class TriangleMesh:
+    """A triangle mesh with vertex colours (world frame).
+
+    Attributes:
+        vertices: (V, 3) float64, metres.
+        faces: (F, 3) int64 vertex indices.
+        colours: (V, 3) uint8 RGB.
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    colours: np.ndarray
+
+
+@dataclass(frozen=True, eq=False)
 class RayBatch:
     """Rays to render, with what the sensor measured along them.
 

@@ -55,7 +55,7 @@ TINY_FRAMES = 12
 @pytest.fixture(scope="session")
 def tiny_sequence(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """The shared tiny synthetic sequence (Replica layout), written once per session."""
-    from eslam.data.synthetic import SynthConfig, write_synthetic_sequence
+    from eslam.synthetic import SynthConfig, write_synthetic_sequence
 
     root = tmp_path_factory.mktemp("tiny") / "data"
     write_synthetic_sequence(root, SynthConfig(frames=TINY_FRAMES, width=80, height=60, seed=3))
@@ -65,7 +65,7 @@ def tiny_sequence(tmp_path_factory: pytest.TempPathFactory) -> Path:
 def tiny_config(sequence: Path, *extra: str):
     """The demo config on ``sequence`` with its known bound and the TINY settings."""
     from eslam.config import load_config
-    from eslam.data.synthetic import read_synthetic_bound
+    from eslam.synthetic import read_synthetic_bound
     from eslam.workflows.demo import DEMO_CONFIG
 
     bound = read_synthetic_bound(sequence)

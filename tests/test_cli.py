@@ -12,10 +12,12 @@ import pytest
 import trimesh
 from scipy.spatial.transform import Rotation
 
-from eslam.cli import EXIT_USER_ERROR, main
-from eslam.data.mesh_io import TriangleMesh, read_mesh_ply, write_mesh_ply
+from eslam.cli import EXIT_USER_ERROR, SETTINGS_WIDTH, main
+from eslam.config import config_help
 from eslam.data.replica import ReplicaSequence
+from eslam.io.mesh_files import read_mesh_ply, write_mesh_ply
 from eslam.io.trajectory import write_tum_trajectory
+from eslam.types import TriangleMesh
 
 
 def _one_line_error(capsys: pytest.CaptureFixture[str]) -> str:
@@ -31,6 +33,23 @@ def test_help(command: list[str], capsys: pytest.CaptureFixture[str]) -> None:
         main([*command, "--help"])
     assert exit_info.value.code == 0
     assert "usage: eslam" in capsys.readouterr().out
+
+
+def test_run_help_lists_every_setting_with_its_docstring(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    with pytest.raises(SystemExit) as exit_info:
+        main(["run", "--help"])
+    assert exit_info.value.code == 0
+    out = capsys.readouterr().out
+    settings = out[out.index("settings (key=value after CONFIG)") :]
+    assert "\n  tracking." in settings and "\n  mapping.every (" in settings
+    rows = config_help()  # every key of the dataclasses, none written by hand
+    every = next(row for row in rows if row.key == "mapping.every")
+    assert f"mapping.every ({every.default}): {' '.join(every.doc.split()[:4])}" in settings
+    for row in rows:
+        assert f"\n  {row.key} ({row.default}): " in settings
+    assert all(len(line) <= SETTINGS_WIDTH for line in settings.splitlines())
 
 
 def test_no_command_is_one_line_error(capsys: pytest.CaptureFixture[str]) -> None:

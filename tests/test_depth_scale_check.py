@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from eslam.data.synthetic import SynthConfig, generate_sequence
+from eslam.synthetic import SynthConfig, generate_sequence
 
 SCRIPT = Path(__file__).resolve().parents[1] / "benchmarks" / "depth_scale_check.py"
 GAP = 30

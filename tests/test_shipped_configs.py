@@ -1,5 +1,5 @@
 """Every config shipped in eslam/configs loads, names a registered layout, and states
-the paper's per-dataset settings (method.md sections 4, 5, 9)."""
+the paper's per-dataset settings (docs/method.md sections 4, 5, 9)."""
 
 from __future__ import annotations
 

@@ -90,7 +90,7 @@ class SceneConfig:
 
 @dataclass
 class FieldConfig:
-    """The scene representation: feature planes and decoders (method.md section 1)."""
+    """The scene representation: feature planes and decoders (docs/method.md section 1)."""
 
     channels: int = 32
     """Feature channels of every plane (paper: 32)."""
@@ -134,7 +134,7 @@ class FieldConfig:
 
 @dataclass
 class RenderConfig:
-    """Ray sampling and SDF volume rendering (method.md section 2)."""
+    """Ray sampling and SDF volume rendering (docs/method.md section 2)."""
 
     samples_stratified: int = 32
     """Samples uniform on [0, far_factor * D] per ray with depth (Replica 32; ScanNet, TUM 48)."""
@@ -164,7 +164,7 @@ class RenderConfig:
 
 @dataclass
 class LossWeights:
-    """Weights of the five loss terms (method.md section 3)."""
+    """Weights of the five loss terms (docs/method.md section 3)."""
 
     free_space: float = 5.0
     """lambda_fs: (s - 1)^2 on samples in front of the truncation band."""
@@ -351,7 +351,7 @@ class MappingConfig:
 
 @dataclass
 class OutputConfig:
-    """What a run writes besides the trajectory (design.md, run directory)."""
+    """What a run writes besides the trajectory (README.md, run folder)."""
 
     checkpoint_every: int = 20
     """Save map.pt (everything needed to resume) every this many frames, and at the end."""

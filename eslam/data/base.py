@@ -3,7 +3,8 @@
 Readers convert their dataset's conventions at this boundary: what leaves a reader is
 a :class:`~eslam.types.Frame` with depth in metres (0 = invalid) and camera-to-world
 poses in OpenCV axes. Anything wrong with the input raises
-:class:`~eslam.errors.InputError` naming the file and the fix.
+:class:`~eslam.errors.InputError` naming the file and the fix. Pose files are parsed and
+poses checked rigid by :mod:`eslam.io.pose_files`.
 """
 
 from __future__ import annotations
@@ -26,9 +27,6 @@ depth scale is wrong: no indoor RGB-D sensor we read sees a median closer or far
 
 COMMON_DEPTH_SCALES = (1.0, 1000.0, 5000.0, 6553.5)
 """Depth PNG units per metre of the usual layouts (metres, ScanNet/7-Scenes mm, TUM, Replica)."""
-
-RIGID_TOLERANCE = 1e-3
-"""Largest |R^T R - I| entry (and |det R - 1|) accepted for a ground-truth rotation."""
 
 
 @runtime_checkable
@@ -131,35 +129,6 @@ def check_image_size(path: Path, shape: tuple[int, ...], intrinsics: Intrinsics)
             f"{intrinsics.width}x{intrinsics.height}",
             "fix the camera parameters or the image size",
         )
-
-
-def check_pose(pose: np.ndarray, source: Path, label: str) -> np.ndarray:
-    """Check that ``pose`` is a finite rigid 4x4 transform; return it as float64.
-
-    Args:
-        pose: (4, 4) camera-to-world matrix.
-        source: the file the pose came from, named in the error.
-        label: where in the file (e.g. "line 12"), named in the error.
-    """
-    pose = np.asarray(pose, dtype=np.float64)
-    if pose.shape != (4, 4):
-        raise InputError(source, f"{label}: pose must be 4x4, got shape {pose.shape}")
-    if not np.all(np.isfinite(pose)):
-        raise InputError(
-            source, f"{label}: pose has non-finite values (nan or inf)", "remove or fix that pose"
-        )
-    rotation = pose[:3, :3]
-    orthogonality = np.abs(rotation.T @ rotation - np.eye(3)).max()
-    determinant = np.linalg.det(rotation)
-    bottom = np.abs(pose[3] - np.array([0.0, 0.0, 0.0, 1.0])).max()
-    if orthogonality > RIGID_TOLERANCE or abs(determinant - 1.0) > RIGID_TOLERANCE or bottom > 0:
-        raise InputError(
-            source,
-            f"{label}: pose is not a rigid transform (|R^T R - I| = {orthogonality:.2g}, "
-            f"det R = {determinant:.4g}, last row {pose[3].tolist()})",
-            "poses must be camera-to-world rotations plus translations",
-        )
-    return pose
 
 
 def check_depth_units(depth: np.ndarray, path: Path, depth_scale: float) -> None:

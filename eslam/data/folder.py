@@ -37,23 +37,20 @@ from collections.abc import Iterable
 from pathlib import Path
 
 import numpy as np
-import torch
 import yaml
-from PIL import Image
 
-from eslam.atomic import write_text, write_with
 from eslam.config import DataConfig
-from eslam.data.base import (
-    FileSequence,
-    FrameReading,
-    check_pose,
-    require_dir,
-    require_file,
-)
+from eslam.data.base import FileSequence, FrameReading, require_dir, require_file
 from eslam.data.transform import transform_from_options
 from eslam.errors import InputError
-from eslam.geometry.pose import pose_from_quaternion_translation, quaternion_translation_from_pose
-from eslam.types import Frame, Intrinsics
+from eslam.io.pose_files import (
+    MATRIX_COLUMNS,
+    TUM_COLUMNS,
+    matrix_poses,
+    read_pose_table,
+    tum_poses,
+)
+from eslam.types import Intrinsics
 
 INTRINSICS_FILE = "intrinsics.yaml"
 POSES_FILE = "poses.txt"
@@ -135,30 +132,6 @@ def _order(stems: Iterable[str]) -> tuple[list[str], np.ndarray]:
     return ordered, np.arange(len(ordered), dtype=np.float64)
 
 
-def _pose_lines(path: Path) -> list[tuple[int, list[float]]]:
-    """(line number, values) of every pose line; all lines hold 8 or all hold 16 values."""
-    lines = []
-    for number, line in enumerate(path.read_text(encoding="utf-8").splitlines(), start=1):
-        text = line.strip()
-        if not text or text.startswith("#"):
-            continue
-        try:
-            values = [float(value) for value in text.replace(",", " ").split()]
-        except ValueError:
-            raise InputError(path, f"line {number}: not a list of numbers") from None
-        if len(values) not in (8, 16) or (lines and len(values) != len(lines[0][1])):
-            expected = len(lines[0][1]) if lines else "8 or 16"
-            raise InputError(
-                path,
-                f"line {number}: expected {expected} numbers, got {len(values)}",
-                "one 'timestamp tx ty tz qx qy qz qw' or one 4x4 row-major pose per line",
-            )
-        lines.append((number, values))
-    if not lines:
-        raise InputError(path, "holds no poses")
-    return lines
-
-
 def read_folder_poses(path: Path, timestamps: np.ndarray, numeric_stems: bool) -> np.ndarray:
     """(N, 4, 4) float64 poses of the N frames with ``timestamps``; NaN where none matches.
 
@@ -172,35 +145,26 @@ def read_folder_poses(path: Path, timestamps: np.ndarray, numeric_stems: bool) -
         InputError: bad lines, non-rigid or non-finite poses, a 4x4 file whose line count
             is not the frame count, or a TUM-style file that matches no frame.
     """
-    lines = _pose_lines(path)
-    poses = np.full((len(timestamps), 4, 4), np.nan)
-    if len(lines[0][1]) == 16:
-        if len(lines) != len(timestamps):
+    table = read_pose_table(path, (TUM_COLUMNS, MATRIX_COLUMNS))
+    if table.columns == MATRIX_COLUMNS:
+        if len(table.lines) != len(timestamps):
             raise InputError(
                 path,
-                f"has {len(lines)} 4x4 poses for {len(timestamps)} frames",
+                f"has {len(table.lines)} 4x4 poses for {len(timestamps)} frames",
                 "write one pose per frame, in frame order (or use timestamped TUM lines)",
             )
-        for row, (number, values) in enumerate(lines):
-            pose = np.array(values).reshape(4, 4)
-            poses[row] = check_pose(pose, path, f"line {number}")
-        return poses
+        return matrix_poses(table)
     if not numeric_stems:
         raise InputError(
             path,
             "timestamped pose lines need image files named by number or timestamp",
             "rename the images (e.g. 000123.png) or write one 4x4 pose per line",
         )
-    for number, values in lines:
-        q = torch.tensor(values[4:8], dtype=torch.float64)
-        if not torch.all(torch.isfinite(q)) or float(q.norm()) < 0.5:
-            raise InputError(
-                path, f"line {number}: quaternion {values[4:8]} is not a rotation (norm ~1)"
-            )
-        pose = pose_from_quaternion_translation(q, torch.tensor(values[1:4], dtype=torch.float64))
-        pose = check_pose(pose.numpy(), path, f"line {number}")
-        nearest = int(np.argmin(np.abs(timestamps - values[0])))
-        if abs(timestamps[nearest] - values[0]) <= TIMESTAMP_TOLERANCE:
+    times, tum = tum_poses(table)
+    poses = np.full((len(timestamps), 4, 4), np.nan)
+    for time, pose in zip(times, tum, strict=True):
+        nearest = int(np.argmin(np.abs(timestamps - time)))
+        if abs(timestamps[nearest] - time) <= TIMESTAMP_TOLERANCE:
             poses[nearest] = pose
     if np.isnan(poses).all():
         raise InputError(
@@ -259,68 +223,3 @@ class FolderSequence(FileSequence):
             if poses_path.exists()
             else None
         )
-
-
-def write_folder_sequence(
-    root: str | Path,
-    frames: Iterable[Frame],
-    depth_scale: float = 1000.0,
-    pose_format: str | None = "tum",
-) -> int:
-    """Write frames in the plain folder layout (atomically, file by file).
-
-    Stems are the zero-padded frame positions (``000000``), colour and depth are PNG.
-
-    Args:
-        root: output folder (created).
-        frames: frames sharing one camera.
-        depth_scale: PNG units per metre, written to intrinsics.yaml.
-        pose_format: "tum" (timestamped lines, timestamp = the stem's number), "matrix"
-            (one 4x4 per line) or None (no poses.txt). Frames without a pose get no
-            "tum" line; "matrix" needs every pose.
-
-    Returns:
-        The number of frames written.
-    """
-    if pose_format not in ("tum", "matrix", None):
-        raise ValueError(f"pose_format must be 'tum', 'matrix' or None, got {pose_format!r}")
-    root = Path(root)
-    intrinsics: Intrinsics | None = None
-    lines: list[str] = []
-    count = 0
-    for number, frame in enumerate(frames):
-        if intrinsics is None:
-            intrinsics = frame.intrinsics
-        elif frame.intrinsics != intrinsics:
-            raise ValueError("all frames of a folder sequence must share one camera")
-        stem = f"{number:06d}"
-        rgb = Image.fromarray(frame.rgb)
-        write_with(root / "color" / f"{stem}.png", lambda tmp, image=rgb: image.save(tmp, "PNG"))
-        units = np.round(np.nan_to_num(frame.depth, nan=0.0) * depth_scale)
-        depth = Image.fromarray(np.clip(units, 0, 65535).astype(np.uint16))
-        write_with(root / "depth" / f"{stem}.png", lambda tmp, image=depth: image.save(tmp, "PNG"))
-        if pose_format == "matrix":
-            if frame.pose_gt is None:
-                raise ValueError(f"frame {frame.index} has no pose: 'matrix' needs one per frame")
-            lines.append(" ".join(f"{v:.17g}" for v in frame.pose_gt.reshape(-1)))
-        elif pose_format == "tum" and frame.pose_gt is not None:
-            q, t = quaternion_translation_from_pose(torch.from_numpy(frame.pose_gt))
-            values = [float(number), *t.tolist(), *q.tolist()]
-            lines.append(" ".join(f"{v:.17g}" for v in values))
-        count += 1
-    if intrinsics is None:
-        raise ValueError("no frames to write")
-    camera = {
-        "width": intrinsics.width,
-        "height": intrinsics.height,
-        "fx": intrinsics.fx,
-        "fy": intrinsics.fy,
-        "cx": intrinsics.cx,
-        "cy": intrinsics.cy,
-        "depth_scale": depth_scale,
-    }
-    write_text(root / INTRINSICS_FILE, yaml.safe_dump(camera, sort_keys=False))
-    if pose_format is not None:
-        header = "# timestamp tx ty tz qx qy qz qw\n" if pose_format == "tum" else ""
-        write_text(root / POSES_FILE, header + "\n".join(lines) + "\n")
-    return count

@@ -25,19 +25,14 @@ from PIL import Image
 
 from eslam.atomic import write_text, write_with
 from eslam.config import DataConfig
-from eslam.data.base import (
-    FileSequence,
-    FrameReading,
-    check_pose,
-    require_dir,
-    require_file,
-)
+from eslam.data.base import FileSequence, FrameReading, require_dir, require_file
 from eslam.data.transform import transform_from_options
 from eslam.errors import InputError
+from eslam.io.pose_files import MATRIX_COLUMNS, matrix_poses, read_pose_table
 from eslam.types import Frame, Intrinsics
 
 REPLICA_DEPTH_SCALE = 6553.5
-"""Replica depth PNG units per metre (NICE-SLAM's renderings; method.md section 9)."""
+"""Replica depth PNG units per metre (NICE-SLAM's renderings; docs/method.md section 9)."""
 
 _FRAME_RE = re.compile(r"^frame(\d+)\.(?:jpg|jpeg|png)$", re.IGNORECASE)
 _DEPTH_RE = re.compile(r"^depth(\d+)\.png$", re.IGNORECASE)
@@ -75,21 +70,7 @@ def read_cam_params(path: Path) -> tuple[Intrinsics, float]:
 def read_traj(path: Path) -> np.ndarray:
     """Read ``traj.txt``: (N, 4, 4) float64 camera-to-world poses, each checked rigid."""
     require_file(path, "Replica trajectory, one 4x4 camera-to-world pose per line")
-    poses = []
-    for line_number, line in enumerate(path.read_text(encoding="utf-8").splitlines(), start=1):
-        if not line.strip():
-            continue
-        try:
-            values = [float(value) for value in line.split()]
-        except ValueError:
-            raise InputError(path, f"line {line_number}: not a list of numbers") from None
-        if len(values) != 16:
-            raise InputError(path, f"line {line_number}: expected 16 numbers, got {len(values)}")
-        pose = np.array(values, dtype=np.float64).reshape(4, 4)
-        poses.append(check_pose(pose, path, f"line {line_number}"))
-    if not poses:
-        raise InputError(path, "holds no poses")
-    return np.stack(poses)
+    return matrix_poses(read_pose_table(path, (MATRIX_COLUMNS,)))
 
 
 def _numbered_files(folder: Path, pattern: re.Pattern[str]) -> dict[int, Path]:

@@ -25,34 +25,27 @@ None), not an error. A finite pose that is not rigid is an error.
 from __future__ import annotations
 
 import re
-from collections.abc import Iterable
 from pathlib import Path
 
 import numpy as np
 from PIL import Image, UnidentifiedImageError
 
-from eslam.atomic import write_text, write_with
 from eslam.config import DataConfig
-from eslam.data.base import (
-    FileSequence,
-    FrameReading,
-    check_pose,
-    require_dir,
-    require_file,
-)
+from eslam.data.base import FileSequence, FrameReading, require_dir
 from eslam.data.transform import transform_from_options
 from eslam.errors import InputError
-from eslam.types import Frame, Intrinsics
+from eslam.io.pose_files import check_pose, read_matrix_file
+from eslam.types import Intrinsics
 
 SCANNET_DEPTH_SCALE = 1000.0
-"""ScanNet depth PNG units per metre (millimetres; method.md section 9)."""
+"""ScanNet depth PNG units per metre (millimetres; docs/method.md section 9)."""
 
 SCANNET_CROP = 10
 """Pixels cropped on every border by default (release config ``cam.crop_edge``)."""
 
 RELEASE_DEPTH_INTRINSICS = (577.590698, 578.729797, 318.905426, 242.683609)
 """fx, fy, cx, cy of the ESLAM release's ScanNet config (scene0000_00's depth camera,
-method.md section 9), used when a scene has no ``intrinsic/intrinsic_depth.txt``."""
+docs/method.md section 9), used when a scene has no ``intrinsic/intrinsic_depth.txt``."""
 
 PRINCIPAL_POINT_BAND = 0.25
 """The principal point must lie within this fraction of the image size from the image
@@ -61,23 +54,6 @@ centre; otherwise the intrinsics are for another image size (e.g. the colour cam
 _COLOUR_RE = re.compile(r"^(\d+)\.(?:jpg|jpeg|png)$", re.IGNORECASE)
 _DEPTH_RE = re.compile(r"^(\d+)\.png$", re.IGNORECASE)
 _POSE_RE = re.compile(r"^(\d+)\.txt$", re.IGNORECASE)
-
-
-def read_matrix_file(path: Path, what: str) -> np.ndarray:
-    """Read a whitespace-separated 4x4 matrix (ScanNet's intrinsics and poses) as float64.
-
-    Non-finite entries (``-inf``, ``nan``) are kept; the caller decides what they mean.
-    """
-    require_file(path, what)
-    try:
-        values = [float(value) for value in path.read_text(encoding="utf-8").split()]
-    except ValueError:
-        raise InputError(path, "not a list of numbers", f"expected {what}") from None
-    except UnicodeDecodeError:
-        raise InputError(path, "not a text file", f"expected {what}") from None
-    if len(values) != 16:
-        raise InputError(path, f"expected 16 numbers (a 4x4 matrix), got {len(values)}")
-    return np.array(values, dtype=np.float64).reshape(4, 4)
 
 
 def fitting_intrinsics(
@@ -202,63 +178,3 @@ class ScanNetSequence(FileSequence):
         )
         self.intrinsics = self.reading.intrinsics
         self._poses = np.stack([read_scannet_pose(poses[n]) for n in self.numbers])
-
-
-def _matrix_text(matrix: np.ndarray) -> str:
-    return "\n".join(" ".join(f"{value:.17g}" for value in row) for row in matrix) + "\n"
-
-
-def write_scannet_sequence(
-    root: str | Path,
-    frames: Iterable[Frame],
-    colour_size: tuple[int, int] | None = None,
-    jpeg_quality: int = 95,
-) -> int:
-    """Write frames in the ScanNet export layout (atomically, file by file).
-
-    A frame without ``pose_gt`` gets a ``-inf`` pose file, as ScanNet writes where its
-    tracking was lost. Depth is written in millimetres; the frames' intrinsics become
-    ``intrinsic_depth.txt`` and, scaled to ``colour_size``, ``intrinsic_color.txt``.
-
-    Args:
-        root: output folder (created).
-        frames: frames sharing one camera.
-        colour_size: (width, height) the colour images are resized to (ScanNet's colour
-            camera has more pixels than its depth camera); None keeps the frame size.
-        jpeg_quality: JPEG quality of the colour images.
-
-    Returns:
-        The number of frames written.
-    """
-    root = Path(root)
-    intrinsics: Intrinsics | None = None
-    count = 0
-    for number, frame in enumerate(frames):
-        if intrinsics is None:
-            intrinsics = frame.intrinsics
-        elif frame.intrinsics != intrinsics:
-            raise ValueError("all frames of a ScanNet sequence must share one camera")
-        rgb = Image.fromarray(frame.rgb)
-        if colour_size is not None:
-            rgb = rgb.resize(colour_size, Image.Resampling.BILINEAR)
-        write_with(
-            root / "color" / f"{number}.jpg",
-            lambda tmp, image=rgb: image.save(tmp, format="JPEG", quality=jpeg_quality),
-        )
-        units = np.round(np.nan_to_num(frame.depth, nan=0.0) * SCANNET_DEPTH_SCALE)
-        depth = Image.fromarray(np.clip(units, 0, 65535).astype(np.uint16))
-        write_with(
-            root / "depth" / f"{number}.png", lambda tmp, image=depth: image.save(tmp, "PNG")
-        )
-        pose = frame.pose_gt if frame.pose_gt is not None else np.full((4, 4), -np.inf)
-        write_text(root / "pose" / f"{number}.txt", _matrix_text(pose))
-        count += 1
-    if intrinsics is None:
-        raise ValueError("no frames to write")
-    k_depth = np.eye(4)
-    k_depth[:3, :3] = intrinsics.matrix()
-    k_colour = np.eye(4)
-    k_colour[:3, :3] = intrinsics.scaled(*(colour_size or intrinsics.size)).matrix()
-    write_text(root / "intrinsic" / "intrinsic_depth.txt", _matrix_text(k_depth))
-    write_text(root / "intrinsic" / "intrinsic_color.txt", _matrix_text(k_colour))
-    return count

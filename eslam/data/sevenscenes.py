@@ -29,27 +29,19 @@ Frames are ordered by their number (gaps allowed); timestamps are the frame numb
 from __future__ import annotations
 
 import re
-from collections.abc import Iterable
 from pathlib import Path
 
 import numpy as np
 import torch
-from PIL import Image
 
-from eslam.atomic import write_text, write_with
 from eslam.config import DataConfig
-from eslam.data.base import (
-    FileSequence,
-    FrameReading,
-    check_pose,
-    require_dir,
-    require_file,
-)
+from eslam.data.base import FileSequence, FrameReading, require_dir
 from eslam.data.scannet import fitting_intrinsics, image_size
 from eslam.data.transform import transform_from_options
 from eslam.errors import InputError
 from eslam.geometry.rotation import orthonormalize_rotation
-from eslam.types import Frame, Intrinsics
+from eslam.io.pose_files import check_pose, read_matrix_file
+from eslam.types import Intrinsics
 
 SEVENSCENES_DEPTH_SCALE = 1000.0
 """7-Scenes depth PNG units per metre (millimetres; dataset page)."""
@@ -72,13 +64,7 @@ _SEQUENCE_RE = re.compile(r"^seq-\d+$", re.IGNORECASE)
 
 def read_intrinsics_file(path: Path, size: tuple[int, int]) -> Intrinsics:
     """Read ``camera-intrinsics.txt`` (3x3 K) for images of ``size`` (width, height)."""
-    try:
-        values = [float(value) for value in path.read_text(encoding="utf-8").split()]
-    except (ValueError, UnicodeDecodeError):
-        raise InputError(path, "not a list of numbers", "expected a 3x3 camera matrix") from None
-    if len(values) != 9:
-        raise InputError(path, f"expected 9 numbers (a 3x3 camera matrix), got {len(values)}")
-    k = np.array(values).reshape(3, 3)
+    k = read_matrix_file(path, "a 3x3 camera matrix", (3, 3))
     return fitting_intrinsics(path, (k[0, 0], k[1, 1], k[0, 2], k[1, 2]), size)
 
 
@@ -109,14 +95,7 @@ def read_sevenscenes_pose(path: Path) -> np.ndarray:
         InputError: not 16 numbers, non-finite, or a rotation off by more than
             :data:`ROTATION_TOLERANCE`.
     """
-    require_file(path, "a 4x4 camera-to-world pose")
-    try:
-        values = [float(value) for value in path.read_text(encoding="utf-8").split()]
-    except (ValueError, UnicodeDecodeError):
-        raise InputError(path, "not a list of numbers", "expected a 4x4 pose") from None
-    if len(values) != 16:
-        raise InputError(path, f"expected 16 numbers (a 4x4 pose), got {len(values)}")
-    pose = np.array(values, dtype=np.float64).reshape(4, 4)
+    pose = read_matrix_file(path, "a 4x4 camera-to-world pose")
     if not np.all(np.isfinite(pose)):
         check_pose(pose, path, "pose")  # raises the shared non-finite error
     error = rotation_error(pose[:3, :3])
@@ -194,46 +173,3 @@ class SevenScenesSequence(FileSequence):
         )
         self.intrinsics = self.reading.intrinsics
         self._poses = np.stack([read_sevenscenes_pose(files["pose"][n]) for n in self.numbers])
-
-
-def write_sevenscenes_sequence(
-    root: str | Path, frames: Iterable[Frame], jpeg_quality: int = 95
-) -> int:
-    """Write frames in the 7-Scenes layout (atomically, file by file).
-
-    Colour is JPEG (as in shared/data's redkitchen), depth millimetres, poses 4x4 text,
-    and the frames' intrinsics go to ``camera-intrinsics.txt``.
-
-    Returns:
-        The number of frames written.
-    """
-    root = Path(root)
-    intrinsics: Intrinsics | None = None
-    count = 0
-    for number, frame in enumerate(frames):
-        if frame.pose_gt is None:
-            raise ValueError(f"frame {frame.index} has no pose: 7-Scenes needs one per frame")
-        if intrinsics is None:
-            intrinsics = frame.intrinsics
-        elif frame.intrinsics != intrinsics:
-            raise ValueError("all frames of a 7-Scenes sequence must share one camera")
-        stem = f"frame-{number:06d}"
-        rgb = Image.fromarray(frame.rgb)
-        write_with(
-            root / f"{stem}.color.jpg",
-            lambda tmp, image=rgb: image.save(tmp, format="JPEG", quality=jpeg_quality),
-        )
-        units = np.round(np.nan_to_num(frame.depth, nan=0.0) * SEVENSCENES_DEPTH_SCALE)
-        depth = Image.fromarray(np.clip(units, 0, 65534).astype(np.uint16))
-        write_with(
-            root / f"{stem}.depth.png",
-            lambda tmp, image=depth: image.save(tmp, "PNG"),
-        )
-        pose_text = "\n".join(" ".join(f"{v:.17g}" for v in row) for row in frame.pose_gt)
-        write_text(root / f"{stem}.pose.txt", pose_text + "\n")
-        count += 1
-    if intrinsics is None:
-        raise ValueError("no frames to write")
-    k_text = "\n".join(" ".join(f"{v:.17g}" for v in row) for row in intrinsics.matrix())
-    write_text(root / INTRINSICS_FILE, k_text + "\n")
-    return count

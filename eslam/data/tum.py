@@ -31,32 +31,19 @@ from __future__ import annotations
 
 import math
 import re
-from collections.abc import Iterable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-import torch
-from PIL import Image
 
-from eslam.atomic import write_text, write_with
 from eslam.config import DataConfig
-from eslam.data.base import (
-    FileSequence,
-    FrameReading,
-    check_pose,
-    require_dir,
-    require_file,
-)
+from eslam.data.base import FileSequence, FrameReading, require_dir, require_file
 from eslam.data.transform import transform_from_options
-from eslam.data.undistort import PlumbBob, Undistorter, distort_map, remap_bilinear, remap_nearest
+from eslam.data.undistort import PlumbBob, Undistorter
 from eslam.errors import ConfigError, InputError
-from eslam.geometry.pose import (
-    interpolate_pose,
-    pose_from_quaternion_translation,
-    quaternion_translation_from_pose,
-)
-from eslam.types import Frame, Intrinsics
+from eslam.io.pose_files import TUM_COLUMNS, read_pose_table, text_lines, tum_poses
+from eslam.types import Intrinsics
 
 TUM_DEPTH_SCALE = 5000.0
 """Depth PNG units per metre (TUM RGB-D file formats page; release tum.yaml png_depth_scale)."""
@@ -90,7 +77,7 @@ class TUMCamera:
 
 TUM_CAMERAS = {
     # TUM RGB-D "camera calibration" page; the same numbers as the ESLAM release's
-    # configs/TUM_RGBD/freiburg{1_desk,2_xyz,3_office}.yaml (method.md section 9).
+    # configs/TUM_RGBD/freiburg{1_desk,2_xyz,3_office}.yaml (docs/method.md section 9).
     "fr1": TUMCamera(
         "fr1",
         Intrinsics(640, 480, 517.3, 516.5, 318.6, 255.3),
@@ -130,18 +117,6 @@ def camera_for(root: Path, name: str | None) -> TUMCamera:
     return TUM_CAMERAS[f"fr{match.group(1)}"]
 
 
-def _data_lines(path: Path) -> Iterable[tuple[int, list[str]]]:
-    """(line number, fields) of every line that is neither blank nor a '#' comment."""
-    try:
-        text = path.read_text(encoding="utf-8")
-    except UnicodeDecodeError as error:
-        raise InputError(path, f"not a text file ({error})") from None
-    for number, line in enumerate(text.splitlines(), start=1):
-        stripped = line.strip()
-        if stripped and not stripped.startswith("#"):
-            yield number, stripped.split()
-
-
 def _timestamp(path: Path, number: int, text: str) -> float:
     try:
         value = float(text)
@@ -172,7 +147,8 @@ def read_file_list(path: Path, what: str) -> FileList:
     require_file(path, f"the TUM list of {what} ('timestamp filename' per line)")
     times: list[float] = []
     paths: list[Path] = []
-    for number, fields in _data_lines(path):
+    for number, text in text_lines(path):
+        fields = text.split()
         if len(fields) != 2:
             raise InputError(
                 path, f"line {number}: expected 'timestamp filename', got {len(fields)} fields"
@@ -200,47 +176,15 @@ class Groundtruth:
 
 
 def read_groundtruth(path: Path) -> Groundtruth:
-    """Read 'timestamp tx ty tz qx qy qz qw' lines; each pose is checked finite and rigid.
+    """Read 'timestamp tx ty tz qx qy qz qw' lines (:mod:`eslam.io.pose_files`).
 
     Raises:
         InputError: naming the line of a wrong field count, a non-number, a non-finite
             value or a quaternion whose norm is not 1 within QUATERNION_NORM_TOLERANCE.
     """
-    times: list[float] = []
-    vectors: list[list[float]] = []
-    numbers: list[int] = []
-    for number, fields in _data_lines(path):
-        if len(fields) != 8:
-            raise InputError(
-                path,
-                f"line {number}: expected 'timestamp tx ty tz qx qy qz qw', "
-                f"got {len(fields)} fields",
-            )
-        times.append(_timestamp(path, number, fields[0]))
-        try:
-            values = [float(field) for field in fields[1:]]
-        except ValueError:
-            raise InputError(path, f"line {number}: not a list of numbers") from None
-        if not all(math.isfinite(value) for value in values):
-            raise InputError(
-                path, f"line {number}: pose has non-finite values (nan or inf)", "fix that line"
-            )
-        norm = math.sqrt(sum(value * value for value in values[3:]))
-        if abs(norm - 1.0) > QUATERNION_NORM_TOLERANCE:
-            raise InputError(
-                path,
-                f"line {number}: quaternion qx qy qz qw has norm {norm:.4g}, not 1",
-                "groundtruth.txt needs unit quaternions (scalar last)",
-            )
-        vectors.append(values)
-        numbers.append(number)
-    if not times:
-        raise InputError(path, "holds no poses")
-    vector = torch.tensor(vectors, dtype=torch.float64)
-    poses = pose_from_quaternion_translation(vector[:, 3:], vector[:, :3]).numpy()
-    for number, pose in zip(numbers, poses, strict=True):  # rigid by construction: a guard
-        check_pose(pose, path, f"line {number}")
-    return Groundtruth(path, np.array(times, dtype=np.float64), poses)
+    table = read_pose_table(path, (TUM_COLUMNS,))
+    times, poses = tum_poses(table, quaternion_tolerance=QUATERNION_NORM_TOLERANCE)
+    return Groundtruth(path, times, poses)
 
 
 def nearest(times: np.ndarray, queries: np.ndarray) -> np.ndarray:
@@ -400,111 +344,3 @@ def _relative_to(reference: np.ndarray, poses: np.ndarray) -> np.ndarray:
     inverse[:3, :3] = reference[:3, :3].T
     inverse[:3, 3] = -reference[:3, :3].T @ reference[:3, 3]
     return inverse @ poses
-
-
-# --- writer (tests and tools) ---------------------------------------------------------
-
-TUM_EPOCH = 1305031452.0
-"""First colour timestamp the writer uses (a TUM-like Unix time, seconds)."""
-DEPTH_DELAY = 0.01
-"""The writer stamps each depth image this many seconds after its colour image."""
-GROUNDTRUTH_PER_FRAME = 3
-"""The writer's ground-truth samples per frame interval (90 Hz at 30 Hz images): one at
-the colour time, the others interpolated (SE(3) geodesic) between frames."""
-
-
-def _stamp(time: float) -> str:
-    return f"{time:.6f}"
-
-
-def _list_text(kind: str, times: Sequence[float], folder: str) -> str:
-    lines = [
-        f"# {kind} images",
-        "# written by eslam.data.tum.write_tum_sequence",
-        "# timestamp filename",
-    ]
-    lines += [f"{_stamp(t)} {folder}/{_stamp(t)}.png" for t in times]
-    return "\n".join(lines) + "\n"
-
-
-def _groundtruth_text(times: Sequence[float], poses: Sequence[np.ndarray]) -> str:
-    samples_t: list[float] = []
-    samples: list[torch.Tensor] = []
-    tensors = [torch.from_numpy(np.asarray(p, dtype=np.float64)) for p in poses]
-    for i, (time, pose) in enumerate(zip(times, tensors, strict=True)):
-        samples_t.append(time)
-        samples.append(pose)
-        if i + 1 < len(tensors):
-            for k in range(1, GROUNDTRUTH_PER_FRAME):
-                s = k / GROUNDTRUTH_PER_FRAME
-                samples_t.append(time + s * (times[i + 1] - time))
-                samples.append(interpolate_pose(pose, tensors[i + 1], s))
-    q, t = quaternion_translation_from_pose(torch.stack(samples))
-    lines = ["# ground truth trajectory", "# timestamp tx ty tz qx qy qz qw"]
-    for time, ti, qi in zip(samples_t, t.tolist(), q.tolist(), strict=True):
-        lines.append(" ".join([_stamp(time), *(f"{v:.17g}" for v in (*ti, *qi))]))
-    return "\n".join(lines) + "\n"
-
-
-def write_tum_sequence(
-    root: str | Path,
-    frames: Iterable[Frame],
-    camera: str = "fr1",
-    with_groundtruth: bool = True,
-    distort: bool = False,
-) -> int:
-    """Write frames in the TUM RGB-D layout (atomically, file by file; lists last).
-
-    Colour time i is TUM_EPOCH + frame.timestamp; depth images are stamped DEPTH_DELAY
-    later; groundtruth.txt holds GROUNDTRUTH_PER_FRAME samples per frame interval, the
-    one nearest each colour time being that frame's exact pose.
-
-    Args:
-        root: output folder (created).
-        frames: frames with the 640x480 intrinsics of ``camera`` (ideal pinhole images),
-            and poses when ``with_groundtruth``.
-        camera: fr1, fr2 or fr3.
-        with_groundtruth: write groundtruth.txt.
-        distort: pass the images through the camera's lens distortion (colour bilinear,
-            depth nearest), so that a reader must undistort them.
-
-    Returns:
-        The number of frames written.
-    """
-    root = Path(root)
-    tum_camera = TUM_CAMERAS[camera]
-    coords = None
-    if distort and tum_camera.distortion is not None:
-        coords = distort_map(tum_camera.intrinsics, tum_camera.distortion)
-    (root / "rgb").mkdir(parents=True, exist_ok=True)
-    (root / "depth").mkdir(parents=True, exist_ok=True)
-    times: list[float] = []
-    poses: list[np.ndarray] = []
-    for frame in frames:
-        if frame.intrinsics != tum_camera.intrinsics:
-            raise ValueError(
-                f"frame {frame.index} has intrinsics {frame.intrinsics}, not those of "
-                f"TUM {camera} {tum_camera.intrinsics}"
-            )
-        if with_groundtruth and frame.pose_gt is None:
-            raise ValueError(f"frame {frame.index} has no pose for groundtruth.txt")
-        time = TUM_EPOCH + frame.timestamp
-        rgb, depth = frame.rgb, np.nan_to_num(frame.depth, nan=0.0)
-        if coords is not None:
-            rgb, depth = remap_bilinear(rgb, coords), remap_nearest(depth, coords)
-        units = np.clip(np.round(depth * TUM_DEPTH_SCALE), 0, 65535).astype(np.uint16)
-        for image, path in (
-            (Image.fromarray(rgb), root / "rgb" / f"{_stamp(time)}.png"),
-            (Image.fromarray(units), root / "depth" / f"{_stamp(time + DEPTH_DELAY)}.png"),
-        ):
-            write_with(path, lambda tmp, image=image: image.save(tmp, format="PNG"))
-        times.append(time)
-        if frame.pose_gt is not None:
-            poses.append(frame.pose_gt)
-    if not times:
-        raise ValueError("no frames to write")
-    write_text(root / "depth.txt", _list_text("depth", [t + DEPTH_DELAY for t in times], "depth"))
-    if with_groundtruth:
-        write_text(root / "groundtruth.txt", _groundtruth_text(times, poses))
-    write_text(root / "rgb.txt", _list_text("color", times, "rgb"))
-    return len(times)

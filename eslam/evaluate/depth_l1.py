@@ -38,9 +38,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from eslam.data.mesh_io import TriangleMesh
 from eslam.evaluate.raycast import MeshRaycaster, pixel_rays
-from eslam.types import Intrinsics
+from eslam.types import Intrinsics, TriangleMesh
 
 RELEASE_VIEWS = 1000
 """Virtual views (ESLAM release, eval_recon.py ``calc_2d_metric(n_imgs=1000)``)."""

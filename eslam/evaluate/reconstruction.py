@@ -1,6 +1,6 @@
 """Mesh reconstruction metrics: accuracy, completion, completion ratio, precision/recall/F1.
 
-The ESLAM protocol (method.md section 6; release ``src/tools/eval_recon.py``,
+The ESLAM protocol (docs/method.md section 6; release ``src/tools/eval_recon.py``,
 ``calc_3d_metric``): sample 450,000 points on each mesh, area-weighted; accuracy is the
 mean distance from reconstruction samples to their nearest GT sample, completion the
 mean distance from GT samples to their nearest reconstruction sample, and the completion
@@ -23,9 +23,9 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from eslam.data.mesh_io import TriangleMesh
 from eslam.evaluate.sampling import sample_surface
 from eslam.evaluate.surface_distance import build_surface_index, distance_to_surface
+from eslam.types import TriangleMesh
 
 RELEASE_SAMPLES = 450_000
 """Points sampled per mesh (ESLAM release, eval_recon.py ``calc_3d_metric(num_points=450000)``)."""
@@ -85,7 +85,7 @@ class ReconstructionResult:
     exact: bool
 
     def as_dict(self) -> dict[str, float | int | bool]:
-        """The metrics under the keys of metrics.json (design.md)."""
+        """The metrics under the keys of metrics.json (README.md lists them)."""
         return {
             "accuracy_cm": self.accuracy_cm,
             "completion_cm": self.completion_cm,

@@ -1,4 +1,4 @@
-"""Absolute trajectory error (ATE) after Umeyama alignment (method.md section 6)."""
+"""Absolute trajectory error (ATE) after Umeyama alignment (docs/method.md section 6)."""
 
 from __future__ import annotations
 

@@ -1,6 +1,6 @@
 """The scene representation: multi-scale feature planes and tiny MLP decoders.
 
-See method.md section 1. :class:`SceneField` is what the renderer, the mapper and the
+See docs/method.md section 1. :class:`SceneField` is what the renderer, the mapper and the
 mesher use; :mod:`eslam.field.planes` holds the plane maths as pure functions.
 """
 

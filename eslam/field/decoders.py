@@ -1,4 +1,4 @@
-"""Tiny MLP decoders from plane features to TSDF and colour (method.md section 1).
+"""Tiny MLP decoders from plane features to TSDF and colour (docs/method.md section 1).
 
 Paper: one hidden layer of 32 channels (64 -> 32 -> out); release: two hidden layers
 of 16 (64 -> 16 -> 16 -> out). ReLU hidden activations; no positional encoding and no

@@ -1,4 +1,4 @@
-"""Multi-scale axis-aligned feature planes (method.md section 1).
+"""Multi-scale axis-aligned feature planes (docs/method.md section 1).
 
 Coordinates: a world point p (metres) inside the scene bound [b_min, b_max] maps to
 p_n = 2 (p - b_min) / (b_max - b_min) - 1 in [-1, 1]^3. Each level of a plane set holds
@@ -91,7 +91,7 @@ def enclosing_bound(bound: torch.Tensor, required: torch.Tensor, multiple: float
 
 
 def normalize_points(points: torch.Tensor, bound: torch.Tensor) -> torch.Tensor:
-    """Map world points into the bound's normalised cube (method.md section 1, release).
+    """Map world points into the bound's normalised cube (docs/method.md section 1, release).
 
     p_n = 2 (p - b_min) / (b_max - b_min) - 1; inside the bound p_n is in [-1, 1].
 
@@ -109,7 +109,7 @@ def normalize_points(points: torch.Tensor, bound: torch.Tensor) -> torch.Tensor:
 
 
 def grid_size(bound: torch.Tensor, resolution: float) -> tuple[int, int, int]:
-    """Vertices per axis (nx, ny, nz) = int(extent / resolution) (method.md section 1).
+    """Vertices per axis (nx, ny, nz) = int(extent / resolution) (docs/method.md section 1).
 
     At least 2 per axis, so that every axis is resolved even by a cell size larger than
     the bound (a case the release does not guard).
@@ -462,7 +462,7 @@ LEVEL_NAMES = ("coarse", "fine")
 
 
 class PlaneSet(nn.Module):
-    """A set of planes (geometry or appearance): coarse and/or fine level (method.md 1).
+    """Geometry or appearance planes: coarse and/or fine level (docs/method.md section 1).
 
     levels "both" with fusion "concat" (paper): [coarse sum, fine sum] -> 2C features;
     fusion "sum" (ablation d): coarse sum + fine sum -> C; levels "coarse" or "fine"

@@ -1,4 +1,4 @@
-"""The scene field: feature planes + tiny MLP decoders (method.md section 1).
+"""The scene field: feature planes + tiny MLP decoders (docs/method.md section 1).
 
 TSDF s(p) = tanh(MLP_g(F_g(p_n))) in units of the truncation T, colour
 c(p) = sigmoid(MLP_a(F_a(p_n))), with p_n the point normalised by the fitted bound and

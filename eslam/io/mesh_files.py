@@ -1,12 +1,49 @@
-"""Mesh inputs of the evaluation commands: a mesh file, or a run folder holding one."""
+"""Mesh files: PLY writing, reading any mesh file, and the mesh a run folder stands for.
+
+trimesh is always called with ``process=False`` so vertices keep their order and are
+never merged: a mesh read back is the mesh written.
+"""
 
 from __future__ import annotations
 
 from pathlib import Path
 
-from eslam.data.mesh_io import TriangleMesh, read_mesh_ply
+import numpy as np
+
+from eslam.atomic import write_with
 from eslam.errors import InputError
 from eslam.io.run_dir import RunDirectory
+from eslam.types import TriangleMesh
+
+
+def write_mesh_ply(path: str | Path, mesh: TriangleMesh) -> None:
+    """Write ``mesh`` as a binary PLY with vertex colours (atomically)."""
+    import trimesh
+
+    tm = trimesh.Trimesh(mesh.vertices, mesh.faces, vertex_colors=mesh.colours, process=False)
+    write_with(path, lambda tmp: tm.export(tmp, file_type="ply", encoding="binary"))
+
+
+def read_mesh_ply(path: str | Path) -> TriangleMesh:
+    """Read a triangle mesh (PLY, OBJ, ... anything trimesh reads) without reordering it."""
+    import trimesh
+
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(path, "mesh file not found")
+    try:
+        tm = trimesh.load(path, process=False, force="mesh")
+    except Exception as error:  # trimesh raises many kinds on a broken file
+        raise InputError(path, f"unreadable mesh ({error})") from None
+    colours = np.zeros((len(tm.vertices), 3), dtype=np.uint8)
+    visual = getattr(tm, "visual", None)
+    if visual is not None and getattr(visual, "kind", None) == "vertex":
+        colours = np.asarray(visual.vertex_colors)[:, :3].astype(np.uint8)
+    return TriangleMesh(
+        vertices=np.asarray(tm.vertices, dtype=np.float64),
+        faces=np.asarray(tm.faces, dtype=np.int64),
+        colours=colours,
+    )
 
 
 def find_mesh(path: str | Path) -> Path:

@@ -1,6 +1,6 @@
 """The run folder: where each output of a run lives, and safe creation of a new one.
 
-A run folder holds (design.md, "Command line contract"): ``config.yaml`` (fully
+A run folder holds (README.md, "Quick start"): ``config.yaml`` (fully
 resolved), ``trajectory.txt`` (TUM, camera-to-world), ``trajectory_gt.txt`` when ground
 truth exists, ``map.pt`` (everything needed to resume), ``mesh.ply``,
 ``mesh_culled.ply``, ``metrics.json``, ``timings.json`` and ``log.txt``.
@@ -72,7 +72,7 @@ class RunDirectory:
 
     @property
     def metrics(self) -> Path:
-        """metrics.json: the run's metrics (keys in design.md)."""
+        """metrics.json: the run's metrics (keys in README.md)."""
         return self.root / "metrics.json"
 
     @property

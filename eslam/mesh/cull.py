@@ -1,4 +1,4 @@
-"""Mesh culling for evaluation: keep what the cameras saw (method.md section 6).
+"""Mesh culling for evaluation: keep what the cameras saw (docs/method.md section 6).
 
 Two protocols, applied alike to a reconstruction (with its estimated poses) and to the
 ground-truth mesh (with the ground-truth poses):
@@ -34,10 +34,9 @@ import numpy as np
 import torch
 
 from eslam.config.device import resolve_device
-from eslam.data.mesh_io import TriangleMesh
 from eslam.errors import ConfigError
 from eslam.mesh.subdivide import subdivide_long_edges
-from eslam.types import Intrinsics
+from eslam.types import Intrinsics, TriangleMesh
 
 CullProtocol = Literal["eslam", "nice"]
 

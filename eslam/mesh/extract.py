@@ -1,4 +1,4 @@
-"""Mesh extraction: marching cubes of the learned TSDF, block by block (method.md section 6).
+"""Mesh extraction: marching cubes of the learned TSDF, block by block (docs/method.md section 6).
 
 The grid of step ``resolution`` over the field's bound is never held whole. It is cut
 into blocks (:mod:`eslam.mesh.grid`); per block:
@@ -26,7 +26,6 @@ from typing import Protocol
 import numpy as np
 import torch
 
-from eslam.data.mesh_io import TriangleMesh
 from eslam.mesh.grid import (
     ExtractionGrid,
     all_corners,
@@ -44,7 +43,7 @@ from eslam.mesh.observed import (
     views_seeing_boxes,
 )
 from eslam.mesh.weld import weld_vertices
-from eslam.types import FieldOutput
+from eslam.types import FieldOutput, TriangleMesh
 
 __all__ = ["ExtractOptions", "ObservedViews", "TSDFField", "extract_mesh", "observed_mask"]
 
@@ -238,7 +237,7 @@ def extract_mesh(
 
     Args:
         field: the field (any device); its ``bound`` is the box meshed.
-        resolution: grid step, metres (method.md section 6: 0.01 Replica/TUM, 0.02 ScanNet).
+        resolution: grid step, metres (docs/method.md section 6: 0.01 Replica/TUM, 0.02 ScanNet).
         views: observed space; None meshes the whole bound (phantom surfaces possible).
         options: block size, coarse step and query chunk.
 

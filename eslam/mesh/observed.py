@@ -1,4 +1,4 @@
-"""Observed space: which world points some keyframe saw (method.md section 6).
+"""Observed space: which world points some keyframe saw (docs/method.md section 6).
 
 A point is observed by a keyframe when it lies in front of the camera, projects inside
 the image (nearest pixel) onto a valid depth D, and its depth along the optical axis is

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from eslam.data.mesh_io import TriangleMesh
+from eslam.types import TriangleMesh
 
 COSLAM_MAX_EDGE = 0.015
 """Co-SLAM's culling subdivides to edges of at most 1.5 cm (neural_slam_eval cull_mesh.py)."""

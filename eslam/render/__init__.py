@@ -1,4 +1,4 @@
-"""Rendering: ray sampling, SDF volume rendering and the shared renderer (method.md 2).
+"""Rendering: ray sampling, SDF volume rendering and the shared renderer (docs/method.md section 2).
 
 Pure maths in ``sampling``, ``volume`` and ``rays``; ``renderer`` puts them together
 around any field that satisfies :class:`SceneFieldLike`.

@@ -1,4 +1,4 @@
-"""Where to sample along rays: depth-guided, uniform, box bounds, importance (method.md 2).
+"""Where to sample along rays: depth-guided, uniform, box, importance (docs/method.md section 2).
 
 Rays are parametrised by z, the depth along the camera's optical axis: a sample at z
 lies at ``origin + z * direction`` with directions of unit camera z (see RayBatch).

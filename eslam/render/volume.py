@@ -1,4 +1,4 @@
-"""Volume rendering of a TSDF: sdf -> alpha -> weights -> depth and colour (method.md 2).
+"""Volume rendering of a TSDF: sdf -> alpha -> weights -> depth, colour (docs/method.md section 2).
 
 Pure functions over (N, S) tensors: N rays, S samples per ray, sorted front to back.
 The TSDF value s is in units of the truncation distance T (s = metric SDF / T, in

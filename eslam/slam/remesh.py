@@ -9,11 +9,12 @@ from pathlib import Path
 
 from eslam.config import load_config
 from eslam.config.device import resolve_device
-from eslam.data.mesh_io import TriangleMesh, write_mesh_ply
 from eslam.errors import ConfigError, InputError
+from eslam.io.mesh_files import write_mesh_ply
 from eslam.io.run_dir import RunDirectory
 from eslam.mesh.extract import extract_mesh
 from eslam.slam.state import load_state
+from eslam.types import TriangleMesh
 
 log = logging.getLogger("eslam")
 

@@ -82,7 +82,7 @@ class RunWriter(RunObserverBase):
         state = self._state()
         self.checkpoint()
         if end.complete and self.config.output.mesh and state.field is not None:
-            from eslam.data.mesh_io import write_mesh_ply
+            from eslam.io.mesh_files import write_mesh_ply
             from eslam.mesh.extract import extract_mesh
 
             mesh = extract_mesh(

@@ -13,8 +13,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from eslam.config import ESLAMConfig, load_config
-from eslam.data.synthetic import SynthConfig, read_synthetic_bound, write_synthetic_sequence
 from eslam.slam.loop import run_slam
+from eslam.synthetic import SynthConfig, read_synthetic_bound, write_synthetic_sequence
 from eslam.workflows.evaluate_run import EvaluationOptions, evaluate_run
 
 DEMO_CONFIG = Path(__file__).resolve().parents[1] / "configs" / "demo.yaml"

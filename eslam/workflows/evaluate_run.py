@@ -1,4 +1,4 @@
-"""`eslam eval RUN_DIR`: score a finished run (method.md section 6), write report.md.
+"""`eslam eval RUN_DIR`: score a finished run (docs/method.md section 6), write report.md.
 
 1. ATE of trajectory.txt against trajectory_gt.txt (all statistics, SE(3) Umeyama).
 2. With a ground-truth mesh: cull the run's mesh (estimated poses) and the GT mesh
@@ -23,7 +23,6 @@ import numpy as np
 
 from eslam.config import ESLAMConfig, load_config
 from eslam.data import RGBDSequence, open_sequence
-from eslam.data.mesh_io import TriangleMesh, read_mesh_ply, write_mesh_ply
 from eslam.errors import InputError
 from eslam.evaluate.depth_l1 import DepthL1Options, depth_l1
 from eslam.evaluate.reconstruction import (
@@ -33,10 +32,11 @@ from eslam.evaluate.reconstruction import (
 )
 from eslam.evaluate.report import write_report
 from eslam.evaluate.trajectory import ATEResult, absolute_trajectory_error, associate_timestamps
-from eslam.io.mesh_files import read_mesh
+from eslam.io.mesh_files import read_mesh, read_mesh_ply, write_mesh_ply
 from eslam.io.run_dir import RunDirectory, write_json
 from eslam.io.trajectory import read_trajectory
 from eslam.mesh.cull import CullCameras, CullOptions, cull_mesh
+from eslam.types import TriangleMesh
 from eslam.viz.plots import plot_trajectories, plot_translation_error
 
 

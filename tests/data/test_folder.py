@@ -12,10 +12,11 @@ import yaml
 
 from eslam.config import DataConfig
 from eslam.data import open_sequence
-from eslam.data.folder import FolderSequence, write_folder_sequence
-from eslam.data.synthetic import SynthConfig, generate_sequence
+from eslam.data.folder import FolderSequence
 from eslam.errors import InputError
 from eslam.geometry.camera import backproject_depth
+from eslam.synthetic import SynthConfig, generate_sequence
+from eslam.testing import write_folder_sequence
 from eslam.types import Frame
 
 WIDTH, HEIGHT = 48, 36

@@ -18,11 +18,11 @@ from eslam.data.scannet import (
     SCANNET_CROP,
     ScanNetSequence,
     depth_intrinsics,
-    write_scannet_sequence,
 )
-from eslam.data.synthetic import SynthConfig, generate_sequence
 from eslam.errors import InputError
 from eslam.geometry.camera import backproject_depth
+from eslam.synthetic import SynthConfig, generate_sequence
+from eslam.testing import write_scannet_sequence
 from eslam.types import Frame
 
 WIDTH, HEIGHT = 80, 60

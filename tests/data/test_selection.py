@@ -11,8 +11,8 @@ from eslam.config import DataConfig
 from eslam.data import FrameSelection, open_sequence
 from eslam.data.base import check_depth_units
 from eslam.data.replica import write_replica_sequence
-from eslam.data.synthetic import SynthConfig, generate_sequence
 from eslam.errors import ConfigError, InputError
+from eslam.synthetic import SynthConfig, generate_sequence
 
 
 @pytest.fixture(scope="module")

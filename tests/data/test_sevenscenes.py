@@ -16,11 +16,11 @@ from eslam.data.sevenscenes import (
     SEVENSCENES_INTRINSICS,
     SevenScenesSequence,
     rotation_error,
-    write_sevenscenes_sequence,
 )
-from eslam.data.synthetic import SynthConfig, generate_sequence
 from eslam.errors import InputError
 from eslam.geometry.camera import backproject_depth, project_points
+from eslam.synthetic import SynthConfig, generate_sequence
+from eslam.testing import write_sevenscenes_sequence
 from eslam.types import Frame
 
 WIDTH, HEIGHT = 64, 48

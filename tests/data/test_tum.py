@@ -11,24 +11,21 @@ from PIL import Image
 
 from eslam.config import DataConfig
 from eslam.data import open_sequence
-from eslam.data.synthetic import FPS, SynthConfig, build_scene, camera_trajectory
-from eslam.data.synthetic_scene import Scene, render_frame
 from eslam.data.transform import ImageTransform
 from eslam.data.tum import (
-    DEPTH_DELAY,
     TUM_CAMERAS,
     TUM_CROP,
     TUM_DEPTH_SCALE,
-    TUM_EPOCH,
     TUM_RESIZE,
     TUMSequence,
     associate,
     camera_for,
     nearest,
     read_groundtruth,
-    write_tum_sequence,
 )
 from eslam.errors import ConfigError, InputError
+from eslam.synthetic import FPS, Scene, SynthConfig, build_scene, camera_trajectory, render_frame
+from eslam.testing.tum import DEPTH_DELAY, TUM_EPOCH, write_tum_sequence
 from eslam.types import Frame
 
 FRAMES = 3
@@ -375,7 +372,7 @@ def test_groundtruth_wrong_field_count(sequence_dir: Path) -> None:
     path = sequence_dir / "groundtruth.txt"
     path.write_text(path.read_text() + "1305031453.0 1 2 3\n")
     count = len(path.read_text().splitlines())
-    _expect_error(sequence_dir, "groundtruth.txt", f"line {count}: expected 'timestamp tx ty tz")
+    _expect_error(sequence_dir, "groundtruth.txt", f"line {count}: expected 8 numbers, got 4")
 
 
 def test_groundtruth_not_numbers(sequence_dir: Path) -> None:

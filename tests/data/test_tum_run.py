@@ -9,12 +9,19 @@ import numpy as np
 import torch
 
 from eslam.config import load_config
-from eslam.data.synthetic import FPS, SynthConfig, build_scene, camera_trajectory, scene_bound
-from eslam.data.synthetic_scene import render_frame
-from eslam.data.tum import TUM_CAMERAS, write_tum_sequence
+from eslam.data.tum import TUM_CAMERAS
 from eslam.geometry.pose import pose_distance
 from eslam.io.trajectory import read_tum_trajectory
 from eslam.slam.loop import run_slam
+from eslam.synthetic import (
+    FPS,
+    SynthConfig,
+    build_scene,
+    camera_trajectory,
+    render_frame,
+    scene_bound,
+)
+from eslam.testing import write_tum_sequence
 from eslam.types import Frame
 from eslam.workflows.demo import DEMO_CONFIG
 from tests.conftest import TINY as LOOP_TINY

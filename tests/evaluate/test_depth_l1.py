@@ -6,7 +6,6 @@ import numpy as np
 import pytest
 import trimesh
 
-from eslam.data.mesh_io import TriangleMesh
 from eslam.evaluate.depth_l1 import (
     DepthL1Options,
     camera_box,
@@ -17,7 +16,7 @@ from eslam.evaluate.depth_l1 import (
     view_error,
 )
 from eslam.evaluate.raycast import MeshRaycaster, pixel_rays
-from eslam.types import Intrinsics
+from eslam.types import Intrinsics, TriangleMesh
 
 CENTRE = np.array([0.5, -1.0, 1.2])
 RADIUS = 2.0

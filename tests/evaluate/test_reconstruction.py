@@ -6,7 +6,6 @@ import numpy as np
 import pytest
 import trimesh
 
-from eslam.data.mesh_io import TriangleMesh
 from eslam.evaluate.reconstruction import (
     ReconstructionOptions,
     SampleDistances,
@@ -14,6 +13,7 @@ from eslam.evaluate.reconstruction import (
     metrics_from_distances,
 )
 from eslam.evaluate.sampling import sample_surface, triangle_areas
+from eslam.types import TriangleMesh
 
 RADIUS = 0.5
 

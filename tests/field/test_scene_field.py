@@ -71,7 +71,7 @@ def test_parameter_count_formula_and_replica_scale():
     hidden = 32
     decoders = (64 * hidden + hidden + hidden + 1) + (64 * hidden + hidden + 3 * hidden + 3)
     assert field.parameter_count() == _expected_plane_count(field) + decoders + 1
-    # method.md section 1: about 6.8 M on Replica room0, almost all in the planes.
+    # docs/method.md section 1: about 6.8 M on Replica room0, almost all in the planes.
     assert 6.0e6 < field.parameter_count() < 7.5e6
     assert _expected_plane_count(field) > 0.99 * field.parameter_count()
 

@@ -7,9 +7,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from eslam.data.mesh_io import TriangleMesh, write_mesh_ply
 from eslam.errors import InputError
-from eslam.io.mesh_files import find_mesh, read_mesh
+from eslam.io.mesh_files import find_mesh, read_mesh, write_mesh_ply
+from eslam.types import TriangleMesh
 
 
 def _triangle(offset: float) -> TriangleMesh:

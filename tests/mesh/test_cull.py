@@ -5,11 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from eslam.data.mesh_io import TriangleMesh
 from eslam.errors import ConfigError
 from eslam.mesh.cull import CullCameras, CullOptions, cull_mesh, visible_vertices
 from eslam.mesh.subdivide import subdivide_long_edges
-from eslam.types import Intrinsics
+from eslam.types import Intrinsics, TriangleMesh
 
 CAMERA = Intrinsics(width=64, height=48, fx=40.0, fy=40.0, cx=31.5, cy=23.5)
 WALL_DEPTH = 2.0

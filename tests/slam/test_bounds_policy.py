@@ -10,12 +10,12 @@ import torch
 
 from eslam.config import DataConfig, ESLAMConfig, load_config
 from eslam.data import open_sequence
-from eslam.data.synthetic import read_synthetic_bound
 from eslam.errors import InputError
 from eslam.geometry.bounds import depth_points, fraction_outside
 from eslam.io.checkpoint import load_checkpoint
 from eslam.slam.bounds_policy import bound_from_frame, check_depth_found
 from eslam.slam.loop import run_slam
+from eslam.synthetic import read_synthetic_bound
 from eslam.workflows.demo import DEMO_CONFIG
 from tests.conftest import TINY as LOOP_TINY
 

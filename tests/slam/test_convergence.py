@@ -16,7 +16,6 @@ import pytest
 import torch
 
 from eslam.config import ESLAMConfig
-from eslam.data.synthetic import SynthConfig, build_scene, generate_sequence, scene_bound
 from eslam.field.scene_field import SceneField
 from eslam.geometry.pose import (
     pose_distance,
@@ -31,6 +30,7 @@ from eslam.render.sampling import ray_box_intersection
 from eslam.slam.mapping import MappingSettings, map_window
 from eslam.slam.tracking import TrackingSettings, track_frame
 from eslam.slam.views import View, make_view, sample_view_rays
+from eslam.synthetic import SynthConfig, build_scene, generate_sequence, scene_bound
 from eslam.types import Frame, RayBatch
 
 pytestmark = pytest.mark.slow  # fits a map over many iterations (still run in CI)

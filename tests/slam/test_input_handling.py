@@ -13,7 +13,9 @@ from PIL import Image
 from eslam.cli import EXIT_USER_ERROR, main
 from eslam.config import load_config
 from eslam.data.replica import write_replica_sequence
-from eslam.data.synthetic import (
+from eslam.io.trajectory import read_tum_trajectory
+from eslam.slam.loop import run_slam
+from eslam.synthetic import (
     SynthConfig,
     build_scene,
     generate_sequence,
@@ -21,8 +23,6 @@ from eslam.data.synthetic import (
     scene_bound,
     write_synthetic_sequence,
 )
-from eslam.io.trajectory import read_tum_trajectory
-from eslam.slam.loop import run_slam
 from eslam.workflows.demo import DEMO_CONFIG
 from tests.conftest import TINY, static_ate_cm
 

@@ -15,30 +15,27 @@ import trimesh
 from scipy.spatial import cKDTree
 
 from eslam.data.replica import REPLICA_DEPTH_SCALE, ReplicaSequence
-from eslam.data.synthetic import (
-    KINECT_AXIAL_NOISE,
+from eslam.errors import InputError
+from eslam.geometry.camera import backproject_depth, pixels_to_camera_directions, project_points
+from eslam.synthetic import (
     SCENES,
+    Scene,
     SynthConfig,
     build_scene,
     camera_trajectory,
-    describe_scene,
     generate_sequence,
-    look_at,
-    sensor_depth,
+    render_frame,
+    render_view,
+    scene_mesh,
     synthetic_intrinsics,
     write_synthetic_sequence,
 )
-from eslam.data.synthetic_mesh import MESH_TOLERANCE, scene_mesh
-from eslam.data.synthetic_scene import (
-    Cylinder,
-    Scene,
-    Sphere,
-    cast_rays,
-    render_frame,
-    render_view,
-)
-from eslam.errors import InputError
-from eslam.geometry.camera import backproject_depth, pixels_to_camera_directions, project_points
+from eslam.synthetic.primitives import Cylinder, Sphere
+from eslam.synthetic.render import cast_rays
+from eslam.synthetic.scenes import describe_scene
+from eslam.synthetic.sensor import KINECT_AXIAL_NOISE, sensor_depth
+from eslam.synthetic.tessellation import MESH_TOLERANCE
+from eslam.synthetic.trajectory import look_at
 from eslam.types import Intrinsics
 
 SMALL = SynthConfig(frames=4, width=80, height=60, seed=3)

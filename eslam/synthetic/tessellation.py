@@ -1,25 +1,17 @@
-"""Ground-truth meshes of synthetic scenes: tessellation helpers and the scene mesh.
+"""Tessellation helpers the synthetic primitives build their ground-truth surfaces from.
 
-Primitives (:mod:`eslam.data.synthetic_scene`) build their triangulated surfaces from
-the helpers here (:class:`Surface`, grids, rectangles, box faces, circle segment
-counts); :func:`scene_mesh` gathers them into one vertex-coloured
-:class:`~eslam.data.mesh_io.TriangleMesh` in the world frame. Curved
-surfaces stay within MESH_TOLERANCE of the exact ones.
+:class:`Surface` (vertices, faces, exact normals, part labels), grids, rectangles, box
+faces and circle segment counts; :mod:`eslam.synthetic.primitives` uses them and
+:mod:`eslam.synthetic.mesh` gathers the surfaces into the scene mesh. Curved surfaces
+stay within MESH_TOLERANCE of the exact ones.
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
-
-from eslam.data.mesh_io import TriangleMesh
-from eslam.data.synthetic_materials import shading
-
-if TYPE_CHECKING:
-    from eslam.data.synthetic_scene import Scene
 
 MESH_TOLERANCE = 2e-4
 """Largest distance (m) between a curved surface and its ground-truth tessellation."""
@@ -105,22 +97,3 @@ def box_faces(lo, hi, skip: tuple[int, ...] = ()) -> list[Surface]:
                 _rectangle(corner, u * (size @ u), v * (size @ v), normal, 2 * axis + side)
             )
     return surfaces
-
-
-def scene_mesh(scene: Scene) -> TriangleMesh:
-    """Ground-truth mesh of ``scene`` in its world frame.
-
-    Planar faces are exact; spheres and cylinders are within MESH_TOLERANCE (0.2 mm)
-    of the analytic surfaces. Room faces point into the room, objects' faces outward;
-    faces resting on the floor are left out (never observable). Vertex colours are the
-    rendered colours (albedo times shading) at the vertices.
-    """
-    pieces, colours = [], []
-    for primitive in scene.primitives:
-        surface = primitive.surface()
-        albedo = primitive.albedo(surface.vertices, surface.parts)
-        colours.append(albedo * shading(surface.normals)[:, None])
-        pieces.append(surface)
-    merged = merge_surfaces(pieces)
-    rgb = np.clip(np.concatenate(colours) * 255.0 + 0.5, 0, 255).astype(np.uint8)
-    return TriangleMesh(merged.vertices, merged.faces, rgb)

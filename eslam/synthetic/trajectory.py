@@ -1,0 +1,78 @@
+"""The synthetic camera path: smooth hand-held-like camera-to-world poses in a scene."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from eslam.synthetic.config import SynthConfig
+from eslam.synthetic.primitives import Scene
+
+
+def look_at(position: np.ndarray, target: np.ndarray, roll: float = 0.0) -> np.ndarray:
+    """(4, 4) camera-to-world pose at ``position`` looking at ``target``, OpenCV axes.
+
+    The image x axis is horizontal (world z up) before rotating by ``roll`` (rad) about
+    the viewing direction; a view straight up or down uses world x as the reference.
+    """
+    forward = np.asarray(target, dtype=np.float64) - position
+    forward /= np.linalg.norm(forward)
+    right = np.cross(forward, [0.0, 0.0, 1.0])
+    if np.linalg.norm(right) < 1e-6:
+        right = np.cross(forward, [1.0, 0.0, 0.0])
+    right /= np.linalg.norm(right)
+    down = np.cross(forward, right)
+    c, s = math.cos(roll), math.sin(roll)
+    pose = np.eye(4)
+    pose[:3, :3] = np.stack([c * right + s * down, c * down - s * right, forward], axis=1)
+    pose[:3, 3] = position
+    return pose
+
+
+def _sway(i: np.ndarray, period: float, rate: float, phase: float, order: int = 0) -> np.ndarray:
+    """A sinusoid of ``period`` frames whose rate of change peaks at ``rate`` per frame
+    (``order`` 0), or that rate of change itself (``order`` 1)."""
+    angle = 2 * math.pi * i / period + phase
+    if order:
+        return rate * np.cos(angle)
+    return rate * period / (2 * math.pi) * np.sin(angle)
+
+
+def camera_trajectory(scene: Scene, config: SynthConfig) -> np.ndarray:
+    """Smooth hand-held-like camera-to-world poses (N, 4, 4) float64 inside the camera box.
+
+    The centre runs at ``step_translation`` (+-30 %, slowly varying) along a closed
+    Lissajous-like loop filling the box. The view direction sweeps in yaw at
+    ``step_rotation_deg`` per frame (+-30 %, slowly varying), sways in pitch around
+    14-22 degrees down and rolls by a few degrees; a look-at builds each rotation.
+    """
+    rng = np.random.default_rng([config.seed, 1])
+    phase = rng.uniform(0.0, 2 * math.pi, 8)
+    s = np.linspace(0.0, 2 * math.pi, 8193) * rng.choice([-1.0, 1.0])
+    unit_curve = np.stack(
+        [
+            0.75 * np.cos(s + phase[0]) + 0.25 * np.sin(2 * s + phase[1]),
+            0.75 * np.sin(s + phase[0]) + 0.25 * np.cos(3 * s + phase[2]),
+            np.sin(2 * s + phase[3]),
+        ],
+        axis=1,
+    )
+    curve = (scene.camera_lo + scene.camera_hi) / 2 + unit_curve * (
+        scene.camera_hi - scene.camera_lo
+    ) / 2
+    length = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(curve, axis=0), axis=1))])
+    i = np.arange(config.frames, dtype=np.float64)
+    speed = config.step_translation + _sway(i, 150, 0.3 * config.step_translation, phase[4], 1)
+    arc = np.mod(rng.uniform(0.0, length[-1]) + np.cumsum(speed) - speed[0], length[-1])
+    positions = np.stack([np.interp(arc, length, curve[:, k]) for k in range(3)], axis=1)
+
+    step = math.radians(config.step_rotation_deg)
+    spin = rng.choice([-1.0, 1.0])
+    yaw = rng.uniform(0.0, 2 * math.pi) + spin * (step * i + _sway(i, 240, 0.3 * step, phase[5]))
+    pitch = -math.radians(rng.uniform(14.0, 22.0)) + _sway(i, 300, 0.3 * step, phase[6])
+    roll = _sway(i, 400, 0.1 * step, phase[7])
+    forward = np.stack([np.cos(pitch) * np.cos(yaw), np.cos(pitch) * np.sin(yaw), np.sin(pitch)], 1)
+    return np.stack(
+        [look_at(p, p + 2.0 * f, r) for p, f, r in zip(positions, forward, roll, strict=True)]
+    )
