@@ -10,12 +10,20 @@ Cases (each a run folder under ``--out``):
   resumed (``eslam resume`` semantics) up to the frame count that fits.
 - ``room0-cpu`` and ``room0-paper``: Replica room0 frames 0-19 with the CPU preset and
   with the paper's settings.
+- ``demo``: the synthetic demo scene (``eslam demo``'s, written under ``--out`` once)
+  with the demo's CPU preset.
+
+``--methods render sdf hybrid`` runs every case once per tracker (``tracking.method``);
+the table then also gives the Sim(3) scale, the median tracking time per frame after
+frame 0, frames per second (frames / wall time of the run) and the frames the tracker
+reported as failed.
 
 Writes a markdown section (machine, command, table) to docs/benchmarks.md unless
 ``--no-append``. Meshing is off: these runs measure tracking and mapping.
 
     python benchmarks/real_data.py --device cpu --cases redkitchen-cpu room0-cpu
     python benchmarks/real_data.py --device cuda            # every case
+    python benchmarks/real_data.py --cases demo --methods render sdf hybrid
 """
 
 from __future__ import annotations
@@ -24,6 +32,7 @@ import argparse
 import datetime
 import json
 import os
+import statistics
 import sys
 import time
 from dataclasses import dataclass
@@ -44,6 +53,9 @@ from _machine import (
 )
 
 from eslam.config import load_config
+from eslam.config.schema import TRACKING_METHODS
+from eslam.evaluate.trajectory import absolute_trajectory_error
+from eslam.io.checkpoint import load_checkpoint
 from eslam.slam.loop import RunResult, run_slam
 
 CONFIGS = REPO / "eslam" / "configs"
@@ -73,21 +85,41 @@ CASES = (
     Case("redkitchen-scannet", "sevenscenes/redkitchen.yaml", "7scenes-redkitchen", 400, True),
     Case("room0-cpu", "replica/room0_cpu.yaml", "replica-room0", None),
     Case("room0-paper", "replica/room0.yaml", "replica-room0", None),
+    Case("demo", "demo.yaml", "", None),
 )
+"""Every case; ``demo`` reads the synthetic demo scene written under ``--out``."""
+
+
+def demo_overrides(out: Path) -> list[str]:
+    """data.path and scene.bound of the demo scene (written to ``out/demo-data`` once)."""
+    from eslam.synthetic import read_synthetic_bound, write_synthetic_sequence
+    from eslam.workflows.demo import DEMO_SCENE
+
+    data = out / "demo-data"
+    if not (data / "synth.json").is_file():
+        write_synthetic_sequence(data, DEMO_SCENE, overwrite=True)
+    return [f"data.path={data}", f"scene.bound={read_synthetic_bound(data)}"]
 
 
 @dataclass(frozen=True)
 class Row:
     case: Case
+    method: str
     result: RunResult
     wall_s: float
 
 
-def run_case(case: Case, args: argparse.Namespace) -> Row:
-    """Run ``case`` into ``args.out/case.name`` and return its metrics."""
-    out = args.out / case.name
+def run_case(case: Case, method: str, args: argparse.Namespace) -> Row:
+    """Run ``case`` with ``method`` into ``args.out/case.name[-method]``; return its metrics."""
+    out = args.out / (case.name if args.methods is None else f"{case.name}-{method}")
+    data = (
+        demo_overrides(args.out)
+        if case.name == "demo"
+        else [f"data.path={args.data_root / case.data}"]
+    )
     overrides = [
-        f"data.path={args.data_root / case.data}",
+        *data,
+        f"tracking.method={method}",
         f"device={args.device}",
         f"threads={args.threads}",
         "output.progress=false",
@@ -101,7 +133,7 @@ def run_case(case: Case, args: argparse.Namespace) -> Row:
     start = time.perf_counter()
     if not case.budgeted:
         result = run_slam(config, out, overwrite=True)
-        return Row(case, result, time.perf_counter() - start)
+        return Row(case, method, result, time.perf_counter() - start)
     probe = run_slam(config, out, stop_after=args.probe, overwrite=True)
     timings = json.loads((out / "timings.json").read_text())
     recent = timings["tracking_s"][1:] + timings["mapping_s"][1:]
@@ -110,10 +142,41 @@ def run_case(case: Case, args: argparse.Namespace) -> Row:
     target = probe.metrics["frames"] + max(0, int(left / max(per_frame, 1e-3)))
     total = frames or target
     result = run_slam(config, out, resume=True, stop_after=min(total, target))
-    return Row(case, result, time.perf_counter() - start)
+    return Row(case, method, result, time.perf_counter() - start)
 
 
-def table(rows: list[Row]) -> str:
+def tracker_figures(row: Row) -> tuple[float, float, float]:
+    """Sim(3) scale of the trajectory, median tracking seconds per frame after frame 0,
+    and frames per second (frames / wall time of the run)."""
+    run_dir = row.result.run_dir
+    timings = json.loads((run_dir / "timings.json").read_text())
+    tracking = timings["tracking_s"][1:] or [float("nan")]
+    scale = float("nan")
+    saved = load_checkpoint(run_dir / "map.pt")["trajectory"]
+    if saved["gt"] is not None:
+        poses, gt = saved["poses"].double().numpy(), saved["gt"].double().numpy()
+        scale = absolute_trajectory_error(poses, gt, with_scale=True).alignment.scale
+    fps = row.result.metrics["frames"] / max(row.wall_s, 1e-9)
+    return scale, statistics.median(tracking), fps
+
+
+def table(rows: list[Row], methods: bool) -> str:
+    if methods:
+        lines = [
+            "| case | tracker | frames | ATE RMSE (cm) | Sim(3) scale | tracking (s/frame) "
+            "| FPS | failed frames | peak memory (MB) |",
+            "|---|---|---:|---:|---:|---:|---:|---:|---:|",
+        ]
+        for row in rows:
+            m = row.result.metrics
+            scale, tracking, fps = tracker_figures(row)
+            lines.append(
+                f"| {row.case.name} | {row.method} | {m['frames']} "
+                f"| {m.get('ate_rmse_cm', float('nan')):.2f} | {scale:.4f} | {tracking:.3f} "
+                f"| {fps:.3f} | {m.get('tracking_failures', '-')} "
+                f"| {m['peak_memory_mb']:.0f} |"
+            )
+        return "\n".join(lines) + "\n"
     lines = [
         "| case | config | frames | ATE RMSE (cm) | ATE mean (cm) | FPT (s) | peak memory (MB) "
         "| wall (min) |",
@@ -144,6 +207,12 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--budget-min", type=float, default=30.0, help="budgeted case limit")
     parser.add_argument("--probe", type=int, default=20, help="frames timed before the budget")
     parser.add_argument("--max-frames", type=int, help="cap every case (smoke tests)")
+    parser.add_argument(
+        "--methods",
+        nargs="+",
+        choices=list(TRACKING_METHODS),
+        help="run each case once per tracker (default: the config's tracker, once)",
+    )
     parser.add_argument("--docs", type=Path, default=DEFAULT_DOCS)
     parser.add_argument("--no-append", action="store_true")
     parser.add_argument("--note", default="")
@@ -159,9 +228,12 @@ def main(argv: list[str] | None = None) -> None:
     load_start = load_average()
     rows = []
     for case in CASES:
-        if case.name in args.cases:
-            row = run_case(case, args)
-            print(f"{case.name}: {row.result.metrics}", flush=True)
+        if case.name not in args.cases:
+            continue
+        configured = load_config(CONFIGS / case.config).tracking.method
+        for method in args.methods or [configured]:
+            row = run_case(case, method, args)
+            print(f"{case.name} {method}: {row.result.metrics}", flush=True)
             rows.append(row)
     now = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
     lines = [
@@ -169,12 +241,12 @@ def main(argv: list[str] | None = None) -> None:
         "",
         *machine_lines(device, (load_start, load_average())),
         f"- command: `{command}`",
-        "- data: ../shared/data (7-Scenes redkitchen frames 0-399, Replica room0 frames 0-19); "
-        "no mesh; FPT = tracking + mapping wall time / frames",
+        "- data: ../shared/data (7-Scenes redkitchen frames 0-399, Replica room0 frames 0-19) "
+        "or the synthetic demo scene; no mesh; FPT = tracking + mapping wall time / frames",
     ]
     if args.note:
         lines.append(f"- note: {args.note}")
-    section = "\n".join([*lines, "", table(rows)])
+    section = "\n".join([*lines, "", table(rows, args.methods is not None)])
     publish(section, args.docs, args.no_append)
 
 

@@ -1,4 +1,4 @@
-"""The one loss function tracking and mapping both call (method.md 3).
+"""The one loss function tracking and mapping both call (docs/method.md section 3).
 
 For a ray with measured depth D and a sample at z with predicted TSDF s (units of T):
 

@@ -315,7 +315,7 @@ MOVED_KEYS = {
 
 @dataclass
 class MappingConfig:
-    """Joint optimisation of map and keyframe poses (method.md section 5; Replica values)."""
+    """Joint optimisation of map and keyframe poses (docs/method.md section 5; Replica values)."""
 
     every: int = 4
     """Map every k-th frame (plus the last); every mapped frame becomes a keyframe."""

@@ -1,4 +1,6 @@
-"""The one renderer tracking and mapping share: rays in, depth and colour out (method.md 2).
+"""The one renderer tracking and mapping share: rays in, depth and colour out.
+
+docs/method.md section 2.
 
 ``render_rays`` renders rays with a measured depth (ESLAM's training rays);
 ``render_rays_without_depth`` renders novel views (uniform samples to the scene box's

@@ -1,4 +1,4 @@
-"""`eslam mesh`: extract mesh.ply again from a run folder's saved map (design.md CLI)."""
+"""`eslam mesh`: extract mesh.ply again from a run folder's saved map."""
 
 from __future__ import annotations
 
