@@ -331,6 +331,11 @@ class MappingConfig:
     """Steps on the first frame (release: 1000)."""
     first_lr_factor: float = 5.0
     """Learning-rate multiplier for the first frame (release: 5)."""
+    first_rays: int | None = None
+    """Rays per step on the first frame; null = ``rays`` (release)."""
+    first_lr_decay: float = 1.0
+    """The first frame's map learning rates fall (cosine) from ``first_lr_factor`` times
+    their value to this fraction of that by the last step; 1 = constant (release)."""
     lr_decoders: float = 0.001
     """Adam learning rate of the decoders and beta (paper)."""
     lr_planes: float = 0.005
@@ -347,6 +352,10 @@ class MappingConfig:
     def __post_init__(self) -> None:
         if self.every < 1 or self.window < 3 or self.rays < 1 or self.iterations < 0:
             raise ValueError("every must be >= 1, window >= 3, rays >= 1, iterations >= 0")
+        if self.first_rays is not None and self.first_rays < 1:
+            raise ValueError(f"first_rays must be >= 1 or null, got {self.first_rays}")
+        if not 0.0 < self.first_lr_decay <= 1.0:
+            raise ValueError(f"first_lr_decay must be in (0, 1], got {self.first_lr_decay}")
 
 
 @dataclass

@@ -272,15 +272,14 @@ class RunLoop:
         frame_of = store.frame_indices
         oldest = min(window, key=lambda k: frame_of[k])
         optimise = [self.config.mapping.optimise_poses and k != oldest for k in window]
-        iterations, lr_factor = mapping_schedule(self.config.mapping, first=len(store) == 1)
+        schedule = mapping_schedule(self.config.mapping, first=len(store) == 1)
         result = map_window(
             field,
             views,
             store.poses[window].to(self.device),
             optimise,
             self.mapping,
-            iterations=iterations,
-            lr_factor=lr_factor,
+            schedule,
             generator=state.generator,
         )
         moved = [i for i, flag in enumerate(optimise) if flag]
@@ -290,7 +289,7 @@ class RunLoop:
             MappingDone(
                 index=index,
                 window=tuple(frame_of[k] for k in window),
-                iterations=iterations,
+                iterations=schedule.iterations,
                 loss=result.loss,
             )
         )

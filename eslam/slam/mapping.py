@@ -14,6 +14,7 @@ optimises (the first frame longer and faster, as the release does).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import torch
@@ -55,15 +56,47 @@ class MappingResult:
     loss: torch.Tensor
 
 
-def mapping_schedule(config: MappingConfig, first: bool) -> tuple[int, float]:
-    """(iterations, learning-rate factor) of a mapping call.
+@dataclass(frozen=True)
+class MappingSchedule:
+    """How one mapping call optimises.
+
+    Attributes:
+        iterations: optimisation steps.
+        lr_factor: multiplier of the map learning rates at the first step.
+        rays: rays per step over the whole window.
+        lr_decay: the map learning rates end at this fraction of their start (cosine).
+    """
+
+    iterations: int
+    lr_factor: float
+    rays: int
+    lr_decay: float = 1.0
+
+    def lr_scale(self, step: int) -> float:
+        """Map learning-rate multiplier at ``step`` (0-based) relative to the start:
+        d + (1 - d) (1 + cos(pi t)) / 2 with t = step / (iterations - 1), d = lr_decay."""
+        if self.lr_decay == 1.0 or self.iterations < 2:
+            return 1.0
+        t = step / (self.iterations - 1)
+        return self.lr_decay + (1.0 - self.lr_decay) * 0.5 * (1.0 + math.cos(math.pi * t))
+
+
+def mapping_schedule(config: MappingConfig, first: bool) -> MappingSchedule:
+    """The schedule of a mapping call.
 
     The first call (the map is empty) runs ``first_iterations`` at ``first_lr_factor``
-    times the learning rates (release: 1000 at 5x); later calls ``iterations`` at 1x.
+    times the learning rates (release: 1000 at 5x, constant), with ``first_rays`` rays
+    and the rates decaying to ``first_lr_decay`` of their start; later calls run
+    ``iterations`` at 1x with ``rays``.
     """
     if first:
-        return config.first_iterations, config.first_lr_factor
-    return config.iterations, 1.0
+        return MappingSchedule(
+            iterations=config.first_iterations,
+            lr_factor=config.first_lr_factor,
+            rays=config.first_rays or config.rays,
+            lr_decay=config.first_lr_decay,
+        )
+    return MappingSchedule(iterations=config.iterations, lr_factor=1.0, rays=config.rays)
 
 
 @dataclass(frozen=True, eq=False)
@@ -163,13 +196,14 @@ def mapping_step(
     optimiser: torch.optim.Optimizer,
     settings: MappingSettings,
     generator: torch.Generator,
+    rays: int | None = None,
 ) -> torch.Tensor:
     """One mapping iteration over the window; returns the loss (0-d, detached, before the step).
 
-    ``mapping.rays // W`` rays from each of the W views. No host synchronisation and
-    fixed shapes.
+    ``rays // W`` rays (default ``mapping.rays``) from each of the W views. No host
+    synchronisation and fixed shapes.
     """
-    per_view = max(1, settings.mapping.rays // len(views))
+    per_view = max(1, (rays or settings.mapping.rays) // len(views))
     device = window.fixed.device
     draws = draw_rays(len(views), per_view, settings.render, generator, device)
     loss = mapping_loss(field, views, window, draws, settings)
@@ -185,8 +219,7 @@ def map_window(
     poses: torch.Tensor,
     optimise: list[bool],
     settings: MappingSettings,
-    iterations: int,
-    lr_factor: float,
+    schedule: MappingSchedule,
     generator: torch.Generator,
 ) -> MappingResult:
     """Optimise ``field`` (in place) and the poses flagged in ``optimise`` on a window.
@@ -195,14 +228,21 @@ def map_window(
         views: the window's keyframes as Views (W of them).
         poses: (W, 4, 4) their current camera-to-world poses.
         optimise: per keyframe, whether its pose is refined.
-        iterations: optimisation steps.
-        lr_factor: multiplier of the map learning rates (5 for the first frame, release).
+        schedule: iterations, learning-rate factor and decay, rays
+            (:func:`mapping_schedule`).
     """
     window = WindowPoses.create(poses, optimise)
-    optimiser = mapping_optimiser(field, window, settings.mapping, lr_factor)
+    optimiser = mapping_optimiser(field, window, settings.mapping, schedule.lr_factor)
+    map_groups = optimiser.param_groups[:2]  # planes, decoders (poses keep their rate)
+    start_lrs = [group["lr"] for group in map_groups]
     loss = torch.full((), float("nan"), device=window.fixed.device)
-    for _ in range(iterations):
-        loss = mapping_step(field, views, window, optimiser, settings, generator)
+    for step in range(schedule.iterations):
+        scale = schedule.lr_scale(step)
+        for group, start in zip(map_groups, start_lrs, strict=True):
+            group["lr"] = start * scale
+        loss = mapping_step(
+            field, views, window, optimiser, settings, generator, rays=schedule.rays
+        )
     with torch.no_grad():
         refined = window.current().detach().clone()
     return MappingResult(poses=refined, loss=loss)

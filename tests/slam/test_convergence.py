@@ -27,7 +27,7 @@ from eslam.losses import compute_losses
 from eslam.render.rays import camera_directions, rays_from_pixels
 from eslam.render.renderer import render_rays, render_rays_without_depth
 from eslam.render.sampling import ray_box_intersection
-from eslam.slam.mapping import MappingSettings, map_window
+from eslam.slam.mapping import MappingSchedule, MappingSettings, map_window
 from eslam.slam.tracking import TrackingSettings, track_frame
 from eslam.slam.views import View, make_view, sample_view_rays
 from eslam.synthetic import SynthConfig, build_scene, generate_sequence, scene_bound
@@ -92,11 +92,10 @@ def fitted() -> FittedMap:
         poses[:1],
         [False],
         settings,
-        FIRST_ITERATIONS,
-        config.mapping.first_lr_factor,
+        MappingSchedule(FIRST_ITERATIONS, config.mapping.first_lr_factor, MAPPING_RAYS),
         generator,
     )
-    assert math.isfinite(first.loss)
+    assert math.isfinite(float(first.loss))
     for _ in range(WINDOWS):
         result = map_window(
             field,
@@ -104,8 +103,7 @@ def fitted() -> FittedMap:
             poses,
             [False] * len(views),
             settings,
-            WINDOW_ITERATIONS,
-            1.0,
+            MappingSchedule(WINDOW_ITERATIONS, 1.0, MAPPING_RAYS),
             generator,
         )
         assert torch.equal(result.poses, poses)  # nothing flagged: poses stay ground truth

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import pytest
 import torch
 
@@ -10,10 +12,13 @@ from eslam.field.scene_field import SceneField
 from eslam.render.rays import camera_directions
 from eslam.render.renderer import render_rays
 from eslam.slam.mapping import (
+    MappingSchedule,
     MappingSettings,
     WindowPoses,
+    map_window,
     mapping_loss,
     mapping_optimiser,
+    mapping_schedule,
     mapping_step,
 )
 from eslam.slam.tracking import (
@@ -124,3 +129,43 @@ def test_steps_do_not_sync_with_the_device() -> None:
         mapping_step(field, [view, view], window, map_optimiser, mapping, generator)
     finally:
         torch.cuda.set_sync_debug_mode("default")
+
+
+def test_mapping_schedules() -> None:
+    config = ESLAMConfig().mapping
+    first = mapping_schedule(config, first=True)
+    assert (first.iterations, first.lr_factor, first.rays) == (1000, 5.0, 4000)
+    assert [first.lr_scale(s) for s in (0, 500, 999)] == [1.0, 1.0, 1.0]  # release: constant
+    later = mapping_schedule(config, first=False)
+    assert (later.iterations, later.lr_factor, later.rays, later.lr_decay) == (15, 1.0, 4000, 1.0)
+    fast = dataclasses.replace(config, first_iterations=101, first_rays=8000, first_lr_decay=0.1)
+    schedule = mapping_schedule(fast, first=True)
+    assert schedule.rays == 8000
+    assert schedule.lr_scale(0) == 1.0 and schedule.lr_scale(100) == pytest.approx(0.1)
+    assert schedule.lr_scale(50) == pytest.approx(0.55)  # halfway down the cosine
+    with pytest.raises(ValueError, match="first_lr_decay"):
+        dataclasses.replace(config, first_lr_decay=0.0)
+
+
+def test_map_window_decays_the_map_learning_rates(monkeypatch: pytest.MonkeyPatch) -> None:
+    config, field, view = _setup()
+    settings = MappingSettings(config.mapping, config.render, config.loss)
+    seen: list[float] = []
+    original = torch.optim.Adam.step
+
+    def spy(self, *args, **kwargs):
+        seen.append(self.param_groups[0]["lr"])
+        return original(self, *args, **kwargs)
+
+    monkeypatch.setattr(torch.optim.Adam, "step", spy)
+    map_window(
+        field,
+        [view],
+        torch.eye(4)[None],
+        [False],
+        settings,
+        MappingSchedule(iterations=3, lr_factor=5.0, rays=64, lr_decay=0.2),
+        torch.Generator().manual_seed(0),
+    )
+    start = 5.0 * config.mapping.lr_planes
+    assert seen == pytest.approx([start, start * 0.6, start * 0.2])

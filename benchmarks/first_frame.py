@@ -1,0 +1,185 @@
+"""The first mapping call: held-out depth L1 and time per schedule, on a synthetic scene.
+
+For each schedule (iterations, learning-rate factor, rays per step, cosine decay of the
+learning rates to a final fraction) a fresh field (seeded) is fit to frame 0 of the
+demo's synthetic room with its ground-truth pose, exactly as the run loop's first
+mapping call does (:func:`eslam.slam.mapping.map_window`). The quality figure is the
+held-out depth L1: mean |rendered - true| depth (cm) over every ``--pixel-step``-th
+valid pixel of frames ``--held-out`` (never mapped), rendered without their depth
+(:func:`~eslam.render.renderer.render_rays_without_depth`: uniform samples to the box
+exit, then importance samples), so it scores the geometry itself. Time is the wall time
+of the mapping call.
+
+    python benchmarks/first_frame.py                          # the default schedules
+    python benchmarks/first_frame.py --schedule fast:150:5:4000:0.1 --config demo.yaml
+
+Schedules are NAME:ITERATIONS:LR_FACTOR:RAYS:DECAY (RAYS 0 = the config's mapping.rays).
+Prints a markdown table and, unless ``--no-append``, appends it to docs/benchmarks.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import torch
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _machine import (
+    DEFAULT_DOCS,
+    REPO,
+    command_line,
+    load_average,
+    machine_lines,
+    publish,
+)
+
+from eslam.config import ESLAMConfig, load_config
+from eslam.render.rays import camera_directions, rays_from_pixels
+from eslam.render.renderer import render_rays_without_depth
+from eslam.slam.mapping import MappingSchedule, MappingSettings, map_window
+from eslam.slam.state import new_field
+from eslam.slam.views import make_view
+from eslam.synthetic import SynthConfig, build_scene, generate_sequence, scene_bound
+from eslam.types import Frame
+from eslam.workflows.demo import DEMO_SCENE
+
+DEFAULT_SCHEDULES = (
+    "release:1000:5:0:1",
+    "cpu-preset:300:5:0:1",
+    "short:150:5:0:1",
+    "short-decay:150:5:0:0.1",
+    "short-wide-decay:150:5:8000:0.1",
+    "tiny-wide-decay:60:5:8000:0.1",
+)
+
+
+@dataclass(frozen=True)
+class Schedule:
+    name: str
+    iterations: int
+    lr_factor: float
+    rays: int
+    decay: float
+
+    @classmethod
+    def parse(cls, text: str) -> Schedule:
+        name, iterations, factor, rays, decay = text.split(":")
+        return cls(name, int(iterations), float(factor), int(rays), float(decay))
+
+
+def held_out_depth_l1(
+    field, frames: list[Frame], indices: list[int], config: ESLAMConfig, step: int
+) -> float:
+    """Mean |depth error| (m) over every ``step``-th valid pixel of the held-out frames."""
+    errors = []
+    with torch.no_grad():
+        for index in indices:
+            frame = frames[index]
+            directions = camera_directions(frame.intrinsics)
+            depth = torch.from_numpy(frame.depth).reshape(-1)
+            pixels = torch.nonzero(depth > 0).squeeze(1)[::step]
+            pose = torch.from_numpy(frame.pose_gt).float()
+            rays = rays_from_pixels(
+                directions[pixels], pose, depth[pixels], torch.zeros(len(pixels), 3)
+            )
+            out = render_rays_without_depth(field, rays.origins, rays.directions, config.render)
+            errors.append((out.depth - rays.depth).abs())
+    return float(torch.cat(errors).mean())
+
+
+def run(args: argparse.Namespace) -> list[tuple[Schedule, float, float]]:
+    config = load_config(REPO / "eslam" / "configs" / args.config, args.overrides)
+    scene = SynthConfig(
+        frames=max(args.held_out) + 1, width=DEMO_SCENE.width, height=DEMO_SCENE.height, seed=0
+    )
+    frames = list(generate_sequence(scene))
+    bound = torch.tensor(scene_bound(build_scene(scene.scene, scene.seed)))
+    first = frames[0]
+    view = make_view(
+        torch.from_numpy(first.rgb).float() / 255.0,
+        torch.from_numpy(first.depth),
+        camera_directions(first.intrinsics),
+    )
+    pose = torch.from_numpy(first.pose_gt).float()[None]
+    settings = MappingSettings(config.mapping, config.render, config.loss)
+    rows = []
+    for schedule in args.schedules:
+        field = new_field(config, bound, torch.device("cpu"))
+        plan = MappingSchedule(
+            schedule.iterations,
+            schedule.lr_factor,
+            schedule.rays or config.mapping.rays,
+            schedule.decay,
+        )
+        generator = torch.Generator().manual_seed(config.seed)
+        start = time.perf_counter()
+        map_window(field, [view], pose, [False], settings, plan, generator)
+        seconds = time.perf_counter() - start
+        field.requires_grad_(False)
+        l1 = held_out_depth_l1(field, frames, args.held_out, config, args.pixel_step)
+        rows.append((schedule, seconds, l1))
+        print(f"{schedule.name}: {seconds:.1f} s, depth L1 {100 * l1:.3f} cm", flush=True)
+    return rows
+
+
+def table(rows: list[tuple[Schedule, float, float]], config_rays: int) -> str:
+    reference = rows[0][2]
+    lines = [
+        "| schedule | iterations | lr factor | rays | lr decay to | time (s) "
+        f"| held-out depth L1 (cm) | vs {rows[0][0].name} |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|",
+    ]
+    for schedule, seconds, l1 in rows:
+        lines.append(
+            f"| {schedule.name} | {schedule.iterations} | {schedule.lr_factor:g} "
+            f"| {schedule.rays or config_rays} | {schedule.decay:g} | {seconds:.1f} "
+            f"| {100 * l1:.3f} | {l1 / reference:.2f}x |"
+        )
+    return "\n".join(lines) + "\n"
+
+
+def parse_args(argv: list[str] | None) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--config", default="demo.yaml", help="config under eslam/configs")
+    parser.add_argument("--schedule", action="append", help="NAME:ITER:FACTOR:RAYS:DECAY")
+    parser.add_argument("--held-out", type=int, nargs="+", default=[3, 6, 9])
+    parser.add_argument("--pixel-step", type=int, default=7)
+    parser.add_argument("--threads", type=int, default=2)
+    parser.add_argument("--docs", type=Path, default=DEFAULT_DOCS)
+    parser.add_argument("--no-append", action="store_true")
+    parser.add_argument("--note", default="")
+    parser.add_argument("overrides", nargs="*", help="config overrides key=value")
+    args = parser.parse_args(argv)
+    args.schedules = [Schedule.parse(s) for s in (args.schedule or DEFAULT_SCHEDULES)]
+    return args
+
+
+def main(argv: list[str] | None = None) -> None:
+    args = parse_args(argv)
+    torch.set_num_threads(args.threads)
+    command = command_line("benchmarks/first_frame.py", argv)
+    load_start = load_average()
+    rows = run(args)
+    config = load_config(REPO / "eslam" / "configs" / args.config, args.overrides)
+    now = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    lines = [
+        f"## first_frame, {now}, cpu",
+        "",
+        *machine_lines(torch.device("cpu"), (load_start, load_average())),
+        f"- command: `{command}`",
+        f"- workload: frame 0 of the demo's synthetic room ({DEMO_SCENE.width}x"
+        f"{DEMO_SCENE.height}), config `{args.config}` {' '.join(args.overrides)}; "
+        f"held-out frames {args.held_out}, every {args.pixel_step}th valid pixel",
+    ]
+    if args.note:
+        lines.append(f"- note: {args.note}")
+    publish("\n".join([*lines, "", table(rows, config.mapping.rays)]), args.docs, args.no_append)
+
+
+if __name__ == "__main__":
+    main()
