@@ -23,13 +23,13 @@ from eslam.config import LossConfig, MappingConfig, RenderConfig
 from eslam.field.scene_field import SceneField
 from eslam.geometry.pose import pose_from_quaternion_translation, quaternion_translation_from_pose
 from eslam.losses import compute_losses
-from eslam.render.renderer import render_rays
 from eslam.slam.views import (
     RayDraws,
     View,
     concatenate_rays,
     draw_rays,
     pixels_from_uniforms,
+    render_drawn,
     view_rays,
 )
 
@@ -177,14 +177,7 @@ def mapping_loss(
             for k, view in enumerate(views)
         ]
     )
-    output = render_rays(
-        field,
-        rays,
-        settings.render,
-        perturb=settings.render.perturb,
-        check=False,
-        noise=draws.jitter,
-    )
+    output = render_drawn(field, rays, draws, settings.render)
     terms = compute_losses(output, rays, settings.mapping.weights, field.truncation, settings.loss)
     return terms.total
 

@@ -21,8 +21,15 @@ import torch
 from eslam.config import LossConfig, RenderConfig, RenderTrackerConfig
 from eslam.geometry.pose import pose_from_quaternion_translation, quaternion_translation_from_pose
 from eslam.losses import compute_losses
-from eslam.render.renderer import SceneFieldLike, render_rays
-from eslam.slam.views import RayDraws, View, draw_rays, pixels_from_uniforms, view_rays
+from eslam.render.renderer import SceneFieldLike
+from eslam.slam.views import (
+    RayDraws,
+    View,
+    draw_rays,
+    pixels_from_uniforms,
+    render_drawn,
+    view_rays,
+)
 
 
 @dataclass(frozen=True)
@@ -138,14 +145,7 @@ def tracking_loss(
     config = settings.tracking
     c2w = variables.pose()
     rays = view_rays(view, c2w, pixels_from_uniforms(view, draws.pixels[0]))
-    output = render_rays(
-        field,
-        rays,
-        settings.render,
-        perturb=settings.render.perturb,
-        check=False,
-        noise=draws.jitter,
-    )
+    output = render_drawn(field, rays, draws, settings.render)
     terms = compute_losses(
         output,
         rays,

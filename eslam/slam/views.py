@@ -14,8 +14,9 @@ import torch
 
 from eslam.config import RenderConfig
 from eslam.render.rays import rays_from_pixels
+from eslam.render.renderer import SceneFieldLike, render_rays
 from eslam.render.sampling import draw_depth_guided_noise
-from eslam.types import RayBatch
+from eslam.types import RayBatch, RenderOutput
 
 
 @dataclass(frozen=True, eq=False)
@@ -152,3 +153,11 @@ def concatenate_rays(batches: list[RayBatch]) -> RayBatch:
         depth=torch.cat([b.depth for b in batches]),
         rgb=torch.cat([b.rgb for b in batches]),
     )
+
+
+def render_drawn(
+    field: SceneFieldLike, rays: RayBatch, draws: RayDraws, render: RenderConfig
+) -> RenderOutput:
+    """Render training rays (all with depth) with the jitter ``draws`` holds: no checks,
+    no random state, no host sync (the optimisation steps' renderer call)."""
+    return render_rays(field, rays, render, perturb=render.perturb, check=False, noise=draws.jitter)
