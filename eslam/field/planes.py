@@ -156,7 +156,7 @@ def sample_planes_reference(
     Returns:
         (N, C) the feature sum f_xy(x, y) + f_xz(x, z) + f_yz(y, z).
     """
-    coords = _plane_coordinates(points_n)
+    coords = _finite(_plane_coordinates(points_n))
     total = None
     for i, (h, w) in enumerate(shapes):
         plane = planes[i, :, :h, :w].unsqueeze(0)
@@ -184,6 +184,12 @@ class _MaskGradient(torch.autograd.Function):
     def backward(ctx, grad: torch.Tensor) -> tuple[torch.Tensor, None]:
         (padding,) = ctx.saved_tensors
         return grad.masked_fill(padding, 0), None
+
+
+def _finite(coords: torch.Tensor) -> torch.Tensor:
+    """NaN coordinates (a caller's bug) read the lower border: grid_sample on the CPU
+    turns NaN into a memory index and crashes the process (a segfault) instead."""
+    return torch.nan_to_num(coords, nan=-1.0)
 
 
 def _clamp_border(coords: torch.Tensor) -> torch.Tensor:
@@ -247,7 +253,7 @@ def sample_planes_fast(
     if scale is None:
         scale = grid_scale(shapes, planes.shape[2], planes.shape[3], planes.device)
     scale = scale.to(planes.dtype)
-    coords = _clamp_border(_plane_coordinates(points_n).to(planes.dtype))
+    coords = _clamp_border(_finite(_plane_coordinates(points_n).to(planes.dtype)))
     grid = (coords + 1.0) * scale - 1.0
     sampled = F.grid_sample(
         planes, grid.unsqueeze(1), mode="bilinear", padding_mode="border", align_corners=True

@@ -141,6 +141,21 @@ def damped_step(system: Linearisation, damping: torch.Tensor) -> torch.Tensor:
     return step[:, 0]
 
 
+MIN_POINTS = 6
+"""Points inside the band needed for a step (a pose has 6 degrees of freedom)."""
+
+MAX_STEP = 0.5
+"""A step longer than this (metres, or radians of turn) is rejected as implausible for
+one frame's correction (a near-singular system), like a step that raises the cost."""
+
+
+def plausible(step: torch.Tensor) -> bool:
+    """Whether a (6,) step is finite and within :data:`MAX_STEP` (reads the device)."""
+    return bool(
+        torch.isfinite(step).all() & (step[:3].norm() <= MAX_STEP) & (step[3:].norm() <= MAX_STEP)
+    )
+
+
 def sdf_points(
     view: View, count: int, generator: torch.Generator
 ) -> tuple[torch.Tensor, torch.Tensor]:
@@ -179,8 +194,13 @@ def track_sdf(
         system = linearise(field, level_points, pose, config)
         damping = torch.tensor(config.damping, dtype=torch.float64, device=pose.device)
         for _ in range(config.iterations):
+            if int(system.valid.sum()) < MIN_POINTS:
+                break  # too few points see the surface to constrain 6 degrees of freedom
             iterations += 1
             step = damped_step(system, damping)
+            if not plausible(step):
+                damping = damping * 4.0
+                continue
             candidate = se3_exp(step.to(pose.dtype)) @ pose
             trial = linearise(field, level_points, candidate, config)
             better = bool(trial.cost <= system.cost)

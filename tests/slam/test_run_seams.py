@@ -25,7 +25,7 @@ from eslam.io.trajectory import read_tum_trajectory
 from eslam.slam.loop import run_slam
 from eslam.slam.observers import FrameDone, MappingDone, RunEnd, RunObserverBase, RunStart
 from eslam.slam.trackers import TRACKERS, make_tracker
-from eslam.slam.tracking import TrackingResult
+from eslam.slam.tracking import TrackingQuality, TrackingResult
 from eslam.workflows.demo import DEMO_CONFIG
 from tests.conftest import TINY, TINY_FRAMES, static_ate_cm, tiny_config
 
@@ -199,3 +199,46 @@ def test_a_new_tracker_plugs_in_and_a_dead_one_is_caught(
     unknown = dataclasses.replace(config, tracking=dataclasses.replace(config.tracking, method="x"))
     with pytest.raises(ConfigError, match=r"unknown tracking.method 'x'.*render"):
         make_tracker(unknown)
+
+
+class FailsEveryOther:
+    """Reports frames 3, 5, 7, ... as failed (with a pose far off), tracks the others
+    by the rendering tracker."""
+
+    def __init__(self, config) -> None:
+        self.real = TRACKERS["render"](config)
+        self.calls = 0
+
+    def track(self, field, view, initial_pose, generator):
+        self.calls += 1
+        result = self.real.track(field, view, initial_pose, generator)
+        if self.calls % 2 == 0:
+            return result
+        far = initial_pose.clone()
+        far[:3, 3] += 1.0
+        return TrackingResult(far, result.loss, TrackingQuality(7, 0.1, 0.05, failed=True))
+
+
+def test_a_failed_frame_keeps_the_prediction_and_is_no_keyframe(
+    tiny_sequence: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setitem(TRACKERS, "flaky", FailsEveryOther)
+    config = tiny_config(tiny_sequence, "output.mesh=false", "mapping.every=1")
+    config = dataclasses.replace(
+        config, tracking=dataclasses.replace(config.tracking, method="flaky")
+    )
+    recorder = Recorder()
+    result = run_slam(config, tmp_path / "run", observers=[recorder])
+    failed = [e for e in recorder.events if e.startswith("frame") and e.endswith("-")]
+    # mapping.every=1 maps every frame but the failed ones (frames 1, 3, 5, ...)
+    assert failed == [f"frame {i} -" for i in range(1, TINY_FRAMES, 2)]
+    assert result.metrics["tracking_failures"] == TINY_FRAMES // 2
+    timings = json.loads((tmp_path / "run" / "timings.json").read_text())
+    assert timings["tracking_failed"][:4] == [None, 1.0, 0.0, 1.0]
+    assert timings["tracking_iterations"][1] == 7.0
+    assert (
+        "frame 1 (timestamp 1.000000): tracking failed (10% inliers"
+        in (tmp_path / "run" / "log.txt").read_text()
+    )
+    # no failed frame kept the far pose: every estimate stays near the ground truth
+    assert result.metrics["ate_rmse_cm"] < 5.0
