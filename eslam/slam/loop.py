@@ -65,6 +65,7 @@ from eslam.slam.state import (
     quality_row,
 )
 from eslam.slam.trackers import make_tracker, predict_pose
+from eslam.slam.tracking import TrackingQuality
 from eslam.slam.views import make_view
 from eslam.types import Frame
 
@@ -121,6 +122,7 @@ class RunLoop:
         self.directions = camera_directions(state.keyframes.intrinsics, device)
         self.last_frame: Frame | None = None
         self._frames_without_depth = 0
+        self._last_failed = False
         self._before_mapping: tuple[dict[str, torch.Tensor], torch.Tensor] | None = None
 
     def run(self, frames: Iterable[Frame], total: int | None, stop_after: int | None) -> RunEnd:
@@ -188,7 +190,9 @@ class RunLoop:
         if index == 0:
             pose = first_pose(frame, self.log).to(self.device)
         else:
-            pose = predict_pose(state.trajectory.poses, self.config.tracking.constant_velocity)
+            # a failed frame's pose is a guess, not evidence of motion: hold still after it
+            velocity = self.config.tracking.constant_velocity and not self._last_failed
+            pose = predict_pose(state.trajectory.poses, velocity)
             if has_depth and state.field is not None and len(state.keyframes) > 0:
                 rgb = torch.from_numpy(frame.rgb).to(self.device).float() / 255.0
                 depth = torch.from_numpy(frame.depth).to(self.device)
@@ -196,9 +200,12 @@ class RunLoop:
                 if view.sampleable_pixels() > 0:
                     result = self.tracker.track(state.field, view, pose, state.generator)
                     tracked, quality = True, result.quality
-                    if quality is None or not quality.failed:
+                    if not bool(torch.isfinite(result.pose).all()):
+                        quality = non_finite_quality(quality)
+                    if not quality_failed(quality):
                         pose = result.pose
-        failed = quality is not None and quality.failed
+        failed = quality_failed(quality)
+        self._last_failed = failed
         if failed:
             self.log.warning(
                 "frame %d (timestamp %.6f): tracking failed (%.0f%% inliers, residual %.1f mm):"
@@ -309,6 +316,17 @@ class RunLoop:
         self.map_frame(self.last_frame, state.next_frame - 1)
         state.mapping_time[-1] += device_clock(self.device) - started
         state.last_mapped = True
+
+
+def quality_failed(quality: TrackingQuality | None) -> bool:
+    """Whether a tracker judged its frame failed (None: the tracker does not judge)."""
+    return quality is not None and quality.failed
+
+
+def non_finite_quality(quality: TrackingQuality | None) -> TrackingQuality:
+    """The judgement of a frame whose tracker returned a non-finite pose: failed."""
+    iterations = 0 if quality is None else quality.iterations
+    return TrackingQuality(iterations, 0.0, float("inf"), failed=True)
 
 
 def preflight(sequence: RGBDSequence) -> None:

@@ -34,7 +34,7 @@ from dataclasses import dataclass
 import torch
 
 from eslam.config import SdfTrackerConfig
-from eslam.geometry.pose import se3_exp
+from eslam.geometry.pose import pose_distance, se3_exp
 from eslam.render.renderer import SceneFieldLike
 from eslam.slam.tracking import RenderTracker, TrackingQuality, TrackingResult, frozen
 from eslam.slam.views import View, pixels_from_uniforms
@@ -156,6 +156,19 @@ def plausible(step: torch.Tensor) -> bool:
     )
 
 
+MAX_CORRECTION = 0.5
+"""A frame's pose may move at most this far from the motion model's guess (metres, and
+radians of turn); farther counts as failed: the solver ran off, whatever it fits."""
+
+
+def within_reach(initial: torch.Tensor, pose: torch.Tensor) -> bool:
+    """Whether ``pose`` is finite and within :data:`MAX_CORRECTION` of ``initial``."""
+    if not bool(torch.isfinite(pose).all()):
+        return False
+    translation, rotation = pose_distance(initial.to(pose), pose)
+    return bool((translation <= MAX_CORRECTION) & (rotation <= MAX_CORRECTION))
+
+
 def sdf_points(
     view: View, count: int, generator: torch.Generator
 ) -> tuple[torch.Tensor, torch.Tensor]:
@@ -217,7 +230,11 @@ def track_sdf(
                 break
     assert system is not None
     inlier_fraction, residual = quality(system, config)
-    failed = inlier_fraction < config.min_inlier_fraction or residual > config.max_residual
+    failed = (
+        inlier_fraction < config.min_inlier_fraction
+        or residual > config.max_residual
+        or not within_reach(initial_pose, pose)
+    )
     return TrackingResult(
         pose=pose,
         loss=system.cost.detach(),

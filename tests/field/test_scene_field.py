@@ -239,3 +239,30 @@ def test_fits_a_sphere_tsdf():
         error = (field.query(points, with_rgb=False).sdf - target(points)).abs().mean().item()
     # Measured 0.0072 (frozen planes: 0.136).
     assert error < 0.03
+
+
+@pytest.mark.parametrize("sampling", ["fast", "reference"])
+def test_nan_points_read_the_border_instead_of_crashing(sampling: str):
+    config = dataclasses.replace(FieldConfig(), plane_sampling=sampling)
+    bound = torch.tensor([[0.0, 2.0], [0.0, 2.0], [0.0, 2.0]])
+    field = SceneField(config, bound, torch.Generator().manual_seed(0))
+    points = torch.rand(50, 3, generator=torch.Generator().manual_seed(1)) * 2
+    points[7] = float("nan")
+    points[9, 2] = float("inf")
+    out = field.query(points)
+    assert bool(torch.isfinite(out.sdf).all()) and bool(torch.isfinite(out.rgb).all())
+    clean = field.query(points[:5])  # the other points are unaffected
+    assert torch.allclose(out.sdf[:5], clean.sdf, atol=1e-6)
+
+
+def test_a_seeded_generator_gives_the_global_rngs_numbers():
+    bound = torch.tensor([[0.0, 2.0], [0.0, 2.0], [0.0, 2.0]])
+    torch.manual_seed(4)
+    global_rng = SceneField(FieldConfig(), bound)
+    state = torch.get_rng_state()
+    seeded = SceneField(FieldConfig(), bound, torch.Generator().manual_seed(4))
+    assert torch.equal(torch.get_rng_state(), state)  # the global generator is untouched
+    for (name, a), (_, b) in zip(
+        global_rng.state_dict().items(), seeded.state_dict().items(), strict=True
+    ):
+        assert torch.equal(a, b), name
