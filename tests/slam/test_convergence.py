@@ -28,6 +28,7 @@ from eslam.render.rays import camera_directions, rays_from_pixels
 from eslam.render.renderer import render_rays, render_rays_without_depth
 from eslam.render.sampling import ray_box_intersection
 from eslam.slam.mapping import MappingSchedule, MappingSettings, map_window
+from eslam.slam.trackers import make_tracker
 from eslam.slam.tracking import TrackingSettings, track_frame
 from eslam.slam.views import View, make_view, sample_view_rays
 from eslam.synthetic import SynthConfig, build_scene, generate_sequence, scene_bound
@@ -204,21 +205,26 @@ TRACKED = 6
 """The held-out frame tracked from a perturbed pose."""
 
 
-def test_tracking_converges_from_3cm_3deg(fitted: FittedMap) -> None:
-    frame = fitted.frames[TRACKED]
-    assert TRACKED not in KEYFRAMES
-    truth = _pose(frame)
+def _perturbed(truth: torch.Tensor) -> torch.Tensor:
+    """``truth`` moved 3 cm (camera frame), then turned 3 degrees about its centre (seeded)."""
     generator = torch.Generator().manual_seed(0)
     direction = torch.randn(3, generator=generator)
     axis = torch.randn(3, generator=generator)
     offset = 0.03 * direction / direction.norm()
     rotation = math.radians(3.0) * axis / axis.norm()
     zero = torch.zeros(3)
-    # on SE(3): move the camera 3 cm (camera frame), then turn it 3 degrees about its centre
     start = truth @ se3_exp(torch.cat((offset, zero))) @ se3_exp(torch.cat((zero, rotation)))
     moved, turned = pose_distance(start, truth)
     assert abs(float(moved) - 0.03) < 1e-5
     assert abs(math.degrees(float(turned)) - 3.0) < 1e-3
+    return start
+
+
+def test_tracking_converges_from_3cm_3deg(fitted: FittedMap) -> None:
+    frame = fitted.frames[TRACKED]
+    assert TRACKED not in KEYFRAMES
+    truth = _pose(frame)
+    start = _perturbed(truth)
 
     # The paper tracks Replica with 8 steps at lr 0.001: Adam moves each parameter by at
     # most about lr per step, enough for the ~1 cm between frames. From 3 cm / 3 degrees
@@ -245,3 +251,30 @@ def test_tracking_converges_from_3cm_3deg(fitted: FittedMap) -> None:
     print(f"tracking error {float(error_t) * 1000:.2f} mm, {math.degrees(float(error_r)):.3f} deg")
     assert float(error_t) < 0.005
     assert math.degrees(float(error_r)) < 0.3
+
+
+def test_sdf_and_hybrid_tracking_on_a_learned_map(fitted: FittedMap) -> None:
+    """On a map learned by ESLAM's own mapping (not an exact SDF), the SDF tracker recovers
+    the 3 cm / 3 degree perturbation to under 3 mm / 0.2 degrees (measured: 0.70 mm,
+    0.023 degrees in 8 iterations), and the hybrid tracker is no worse than the
+    rendering tracker with the paper's settings from the same start."""
+    frame = fitted.frames[TRACKED]
+    truth = _pose(frame)
+    start = _perturbed(truth)
+    view = _view(frame, fitted.directions, BORDER)
+    config = fitted.config
+
+    def error(method: str) -> tuple[float, float]:
+        tracking = dataclasses.replace(config.tracking, method=method)
+        tracker = make_tracker(dataclasses.replace(config, tracking=tracking))
+        result = tracker.track(fitted.field, view, start, torch.Generator().manual_seed(0))
+        assert result.quality is None or not result.quality.failed
+        moved, turned = pose_distance(result.pose, truth)
+        print(f"{method}: {float(moved) * 1000:.2f} mm, {math.degrees(float(turned)):.3f} deg")
+        return float(moved), math.degrees(float(turned))
+
+    sdf_t, sdf_r = error("sdf")
+    assert sdf_t < 0.003 and sdf_r < 0.2
+    hybrid_t, hybrid_r = error("hybrid")
+    render_t, render_r = error("render")
+    assert hybrid_t <= render_t and hybrid_r <= render_r
