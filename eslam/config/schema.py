@@ -246,12 +246,17 @@ class SdfTrackerConfig:
     counts as failed: it keeps the motion model's pose and is no keyframe."""
     max_residual: float = 0.02
     """A robust RMS residual of the inliers above this (metres) also fails the frame."""
+    degeneracy: float = 0.0
+    """Pose directions whose per-point information falls below this are held at the
+    guess (Zhang et al. 2016; sliding along a plane); 0 turns the test off."""
 
     def __post_init__(self) -> None:
         if not self.levels or min(self.levels) < 6 or list(self.levels) != sorted(self.levels):
             raise ValueError(f"levels must be increasing point counts >= 6, got {self.levels}")
         if self.iterations < 1 or self.robust_scale <= 0 or not 0 < self.max_sdf <= 1:
             raise ValueError("iterations must be >= 1, robust_scale > 0, max_sdf in (0, 1]")
+        if self.degeneracy < 0:
+            raise ValueError(f"degeneracy must be >= 0, got {self.degeneracy}")
         if not 0 <= self.min_inlier_fraction < 1 or self.max_residual <= 0:
             raise ValueError("min_inlier_fraction must be in [0, 1), max_residual > 0")
 

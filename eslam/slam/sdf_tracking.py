@@ -86,6 +86,7 @@ class Linearisation:
         hessian: (6, 6) J^T W J (float64).
         gradient: (6,) J^T W r (float64).
         valid: (N,) bool, points inside the bound and the band.
+        centre: (3,) float64 weighted centroid of the points (for :func:`constrained_directions`).
     """
 
     residual: torch.Tensor
@@ -94,6 +95,7 @@ class Linearisation:
     hessian: torch.Tensor
     gradient: torch.Tensor
     valid: torch.Tensor
+    centre: torch.Tensor
 
 
 def linearise(
@@ -121,6 +123,7 @@ def linearise(
     jacobian = truncation * torch.cat((gradient, torch.cross(points, gradient, dim=-1)), dim=-1)
     jacobian = jacobian.double()
     weighted = jacobian * weight.double()[:, None]
+    total = weight.double().sum().clamp_min(1e-12)
     return Linearisation(
         residual=residual,
         weight=weight,
@@ -128,7 +131,56 @@ def linearise(
         hessian=weighted.T @ jacobian,
         gradient=weighted.T @ residual.double(),
         valid=valid,
+        centre=(weight.double()[:, None] * points.double()).sum(dim=0) / total,
     )
+
+
+def cross_matrix(vector: torch.Tensor) -> torch.Tensor:
+    """(3, 3) [a]_x with [a]_x b = a x b."""
+    x, y, z = vector.unbind()
+    zero = torch.zeros_like(x)
+    return torch.stack(
+        (torch.stack((zero, -z, y)), torch.stack((z, zero, -x)), torch.stack((-y, x, zero)))
+    )
+
+
+def constrained_directions(system: Linearisation, threshold: float) -> tuple[torch.Tensor, int]:
+    """Projector onto the pose directions the points constrain, and how many are not.
+
+    Degeneracy test of Zhang, Kaess and Singh (ICRA 2016, "On degeneracy of
+    optimization-based state estimation problems"): an eigenvector of the information
+    matrix whose eigenvalue is small is a direction the data cannot see (sliding along a
+    plane or a corridor; turning about a cylinder's axis), and a step along it only
+    follows noise, so the step is projected onto the well-constrained eigenvectors and the
+    guess is kept along the others.
+
+    The eigen-analysis uses a tangent centred on the points' weighted centroid c, so that
+    its translation and rotation parts do not mix through the world origin: a point moves
+    by v_c + omega x (p - c) with v_c = v + omega x c, i.e. xi_c = A xi with
+    A = [[I, -[c]_x], [0, I]], and H_c = A^-T H A^-1. H_c is divided by the sum of the
+    weights (per-point information: about 1 along a direction every point's normal sees,
+    rotations in metres of lever) and eigenvalues below ``threshold`` are degenerate. The
+    projector in the solver's tangent is A^-1 P_c A.
+
+    Returns:
+        (6, 6) float64 projector (the identity when nothing is degenerate or
+        ``threshold`` is 0) and the number of degenerate directions.
+    """
+    identity = torch.eye(6, dtype=torch.float64, device=system.hessian.device)
+    if threshold <= 0:
+        return identity, 0
+    to_centred = identity.clone()
+    to_centred[:3, 3:] = -cross_matrix(system.centre)
+    from_centred = identity.clone()
+    from_centred[:3, 3:] = cross_matrix(system.centre)
+    information = from_centred.T @ system.hessian @ from_centred
+    information = information / system.weight.double().sum().clamp_min(1e-12)
+    eigenvalues, eigenvectors = torch.linalg.eigh(information)
+    kept = eigenvectors[:, eigenvalues >= threshold]
+    degenerate = 6 - kept.shape[1]
+    if degenerate == 0:
+        return identity, 0
+    return from_centred @ (kept @ kept.T) @ to_centred, degenerate
 
 
 def damped_step(system: Linearisation, damping: torch.Tensor) -> torch.Tensor:
@@ -210,7 +262,8 @@ def track_sdf(
             if int(system.valid.sum()) < MIN_POINTS:
                 break  # too few points see the surface to constrain 6 degrees of freedom
             iterations += 1
-            step = damped_step(system, damping)
+            projector, _ = constrained_directions(system, config.degeneracy)
+            step = projector @ damped_step(system, damping)
             if not plausible(step):
                 damping = damping * 4.0
                 continue

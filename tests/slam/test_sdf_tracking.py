@@ -14,7 +14,13 @@ from torch import nn
 from eslam.config import SdfTrackerConfig
 from eslam.geometry.pose import pose_distance, se3_exp
 from eslam.render.rays import camera_directions
-from eslam.slam.sdf_tracking import SdfTracker, robust_weights
+from eslam.slam.sdf_tracking import (
+    SdfTracker,
+    constrained_directions,
+    linearise,
+    robust_weights,
+    sdf_points,
+)
 from eslam.slam.views import make_view
 from eslam.types import FieldOutput, Intrinsics
 
@@ -152,3 +158,43 @@ def test_depth_that_fits_nothing_is_reported_as_failed() -> None:
     )
     assert result.quality is not None and result.quality.failed
     assert result.quality.inlier_fraction < 0.5
+
+
+WALL_POSE = look_at((3.0, 1.5, 1.25), (4.0, 1.5, 1.25))
+"""1 m in front of the wall x = 4, seeing nothing else: only x and the tilts are observable."""
+
+
+def test_degenerate_directions_of_a_wall_are_found_and_held() -> None:
+    wall = make_view(
+        torch.zeros(CAMERA.height, CAMERA.width, 3),
+        render_depth(WALL_POSE),
+        camera_directions(CAMERA),
+        2,
+    )
+    config = dataclasses.replace(SdfTrackerConfig(), degeneracy=0.01)
+    points, _ = sdf_points(wall, 2000, torch.Generator().manual_seed(0))
+    system = linearise(AnalyticField(), points, WALL_POSE, config)
+    projector, degenerate = constrained_directions(system, config.degeneracy)
+    # sliding along y and z, and turning about the wall's normal (x), say nothing
+    assert degenerate == 3
+    along_normal = torch.tensor([1.0, 0, 0, 0, 0, 0], dtype=torch.float64)
+    assert torch.allclose(projector @ along_normal, along_normal, atol=1e-6)
+    for sliding in ([0, 1.0, 0, 0, 0, 0], [0, 0, 1.0, 0, 0, 0]):
+        assert float((projector @ torch.tensor(sliding, dtype=torch.float64)).norm()) < 1e-6
+    # a turn about the normal through the points' centroid: omega = e_x, v = -omega x c
+    spin = torch.cat((-torch.linalg.cross(torch.tensor([1.0, 0, 0]).double(), system.centre),
+                      torch.tensor([1.0, 0, 0]).double()))
+    assert float((projector @ spin).norm()) < 1e-6
+    off, none = constrained_directions(system, 0.0)
+    assert none == 0 and torch.equal(off, torch.eye(6, dtype=torch.float64))
+
+    # tracking from 2 cm off along the normal and 2 cm along the wall: the normal offset
+    # is corrected, the sliding one is kept exactly (the data cannot see it)
+    start = WALL_POSE.clone()
+    start[:3, 3] += torch.tensor([-0.02, 0.02, 0.0])
+    result = SdfTracker(config).track(
+        AnalyticField(), wall, start, torch.Generator().manual_seed(0)
+    )
+    offset = result.pose[:3, 3] - WALL_POSE[:3, 3]
+    assert abs(float(offset[0])) < 0.001
+    assert float(offset[1]) == pytest.approx(0.02, abs=1e-5)
