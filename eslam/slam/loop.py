@@ -28,13 +28,12 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from eslam.config import ESLAMConfig, save_config
+from eslam.config import ESLAMConfig
 from eslam.config.device import resolve_device
 from eslam.data import RGBDSequence, open_sequence
 from eslam.data.source import FrameSource, SequenceSource, source_length
-from eslam.errors import ConfigError, ESLAMError, InputError, RunInterrupted, RunStopped
+from eslam.errors import ConfigError, InputError
 from eslam.field.scene_field import SceneField
-from eslam.io.run_dir import RunDirectory, prepare_run_directory
 from eslam.render.rays import camera_directions
 from eslam.slam.bounds_policy import (
     bound_from_frame,
@@ -55,6 +54,12 @@ from eslam.slam.observers import (
 )
 from eslam.slam.progress import ProgressObserver, finite_ate_pairs
 from eslam.slam.resources import PeakMemory, device_clock
+from eslam.slam.run_folder import (
+    absolute_data_path,
+    check_saved_frames,
+    log_lock_takeover,
+    open_run_folder,
+)
 from eslam.slam.run_writer import RunWriter
 from eslam.slam.state import (
     FrameMark,
@@ -64,6 +69,7 @@ from eslam.slam.state import (
     new_field,
     quality_row,
 )
+from eslam.slam.stops import save_on_failure, stopped_error
 from eslam.slam.trackers import make_tracker, predict_pose
 from eslam.slam.tracking import TrackingQuality
 from eslam.slam.views import make_view
@@ -416,48 +422,47 @@ def run_slam(
         RunInterrupted: Ctrl-C (or the CLI's SIGTERM) after frames were processed.
     """
     device = resolve_device(config.device)
+    config = absolute_data_path(config)
     source, sequence = _open_input(config, source)
     intrinsics = source.intrinsics if source is not None else sequence.intrinsics  # type: ignore[union-attr]
-    run = RunDirectory(Path(run_dir)) if resume else prepare_run_directory(run_dir, overwrite)
-    with run_log(run.log) as run_logger:
-        if resume:
+    folder = open_run_folder(run_dir, config, sequence, resume, overwrite)
+    with folder as (run, lock), run_log(run.log) as run_logger:
+        log_lock_takeover(lock, run_logger)
+        if resume and run.map.is_file():
             state = load_state(run.map, config, device)
+            check_saved_frames(sequence, state.next_frame, run.map)
         else:
-            save_config(config, run.config)
+            if resume:
+                run_logger.info("no frame was saved before: the run starts at frame 0")
             state = initial_state(config, intrinsics, device)
-        if sequence is not None:
-            source = SequenceSource(sequence, start=state.next_frame)
-        assert source is not None
-        remaining = source_length(source)
-        total = None if remaining is None else state.next_frame + remaining
         memory = PeakMemory(device)
-        memory.start()
         writer = RunWriter(run, config, memory)
-        everyone = Observers(
-            [writer, LogObserver(run_logger), ProgressObserver(config.output.progress), *observers]
-        )
-        loop = RunLoop(config, state, device, everyone, source.name, run_logger)
-        if resume and not state.last_mapped and isinstance(source, SequenceSource):
-            loop.last_frame = source.frame(state.next_frame - 1)
-        everyone.on_start(RunStart(config, run.root, state, device, source.name, remaining, resume))
+        writer.saved_frames = state.next_frame
         try:
-            end = loop.run(source, total, stop_after)
+            if sequence is not None:
+                source = SequenceSource(sequence, start=state.next_frame)
+            assert source is not None
+            remaining = source_length(source)
+            total = None if remaining is None else state.next_frame + remaining
+            memory.start()
+            progress = ProgressObserver(config.output.progress)
+            everyone = Observers([writer, LogObserver(run_logger), progress, *observers])
+            loop = RunLoop(config, state, device, everyone, source.name, run_logger)
+            if resume and not state.last_mapped and isinstance(source, SequenceSource):
+                loop.last_frame = source.frame(state.next_frame - 1)
+            everyone.on_start(
+                RunStart(config, run.root, state, device, source.name, remaining, resume)
+            )
+            try:
+                end = loop.run(source, total, stop_after)
+            except BaseException as error:
+                save_on_failure(everyone, error, state.next_frame, run_logger)
+                raise
+            everyone.on_finish(end)
         except BaseException as error:
-            everyone.on_failure(error, state.next_frame)
-            stopped = _stopped(error, state.next_frame, run.root)
+            stopped = stopped_error(error, writer.saved_frames, run.root)
             if stopped is error:
                 raise
             raise stopped from error
-        everyone.on_finish(end)
         poses = state.trajectory.poses.detach().cpu().double().numpy()
         return RunResult(run_dir=run.root, poses=poses, metrics=dict(writer.metrics or {}))
-
-
-def _stopped(error: BaseException, frames: int, run_dir: Path) -> BaseException:
-    """What to raise for ``error`` after ``frames`` frames were saved in ``run_dir``."""
-    if frames == 0:
-        return error
-    if isinstance(error, KeyboardInterrupt):
-        return RunInterrupted(frames, run_dir)
-    resumable = isinstance(error, ESLAMError | OSError | MemoryError | torch.cuda.OutOfMemoryError)
-    return RunStopped(error, frames, run_dir) if resumable else error

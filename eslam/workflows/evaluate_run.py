@@ -97,11 +97,18 @@ def evaluate_run(run_dir: str | Path, options: EvaluationOptions) -> dict[str, o
         InputError: not a finished run folder, a missing mesh, or an unreadable GT mesh.
     """
     run = RunDirectory(Path(run_dir))
-    for path in (run.config, run.trajectory, run.metrics):
-        if not path.is_file():
-            raise InputError(path, "not found: not a finished run folder", "run `eslam run` first")
+    if not run.config.is_file():
+        raise InputError(run.config, "not found: not a run folder", "run `eslam run` first")
+    if not run.trajectory.is_file():
+        raise InputError(
+            run.trajectory,
+            "not found: the run saved no frame yet",
+            f"continue it with `eslam resume {run.root}`",
+        )
     config = load_config(run.config)
-    metrics: dict[str, object] = json.loads(run.metrics.read_text(encoding="utf-8"))
+    metrics: dict[str, object] = {}
+    if run.metrics.is_file():  # a run killed before its first checkpoint's metrics has none
+        metrics = json.loads(run.metrics.read_text(encoding="utf-8"))
     metrics = {k: v for k, v in metrics.items() if k not in EVALUATION_KEYS}
     settings: list[str] = []
     images: list[tuple[str, str]] = []
