@@ -564,8 +564,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"eslam {args.command}: error: {error}", file=sys.stderr)
         return EXIT_USER_ERROR
     except KeyboardInterrupt as interrupt:
-        detail = f": {interrupt}" if str(interrupt) else ""
-        print(f"eslam {args.command}: interrupted{detail}", file=sys.stderr)
+        detail = str(interrupt) or "interrupted"
+        if not detail.startswith("interrupted"):
+            detail = f"interrupted: {detail}"
+        print(f"eslam {args.command}: {detail}", file=sys.stderr)
         return EXIT_INTERRUPTED
     finally:
         if previous is not None:
