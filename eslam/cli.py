@@ -229,6 +229,7 @@ def _command_eval(args: argparse.Namespace) -> int:
         cull_every=args.cull_every,
         max_unobserved_fraction=args.max_unobserved,
         device=args.device,
+        data=Path(args.data).absolute() if args.data else None,
     )
     metrics = evaluate_run(args.run_dir, options)
     print(f"wrote {Path(args.run_dir) / 'metrics.json'} and report.md")
@@ -517,6 +518,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     evaluation.add_argument("run_dir", metavar="RUN_DIR", help="a finished run folder")
     evaluation.add_argument("--gt-mesh", help="ground-truth mesh in the poses' world frame")
+    evaluation.add_argument(
+        "--data", metavar="PATH", help="the run's sequence, where it moved (default: config.yaml's)"
+    )
     evaluation.add_argument(
         "--protocol", choices=("eslam", "nice"), default="eslam", help="culling (default eslam)"
     )

@@ -76,7 +76,7 @@ def open_run_folder(
     command = "eslam resume" if resume else "eslam run"
     with run_folder_lock(run.root, command) as lock:
         if resume:
-            _check_same_input(run, sequence)
+            check_same_input(run, sequence)
         else:
             check_new_run(run, overwrite)
         save_config(config, run.config)
@@ -96,7 +96,7 @@ def _check_resumable(run: RunDirectory) -> None:
         )
 
 
-def _check_same_input(run: RunDirectory, sequence: RGBDSequence | None) -> None:
+def check_same_input(run: RunDirectory, sequence: RGBDSequence | None) -> None:
     """Refuse a sequence whose fingerprint differs from the one input.json recorded."""
     if sequence is None or not run.input.is_file():
         return  # a live source, or a folder written before fingerprints: nothing to check

@@ -36,6 +36,7 @@ from eslam.io.mesh_files import read_mesh, read_mesh_ply, write_mesh_ply
 from eslam.io.run_dir import RunDirectory, write_json
 from eslam.io.trajectory import read_trajectory
 from eslam.mesh.cull import CullCameras, CullOptions, cull_mesh
+from eslam.slam.run_folder import check_same_input
 from eslam.types import TriangleMesh
 from eslam.viz.plots import plot_trajectories, plot_translation_error
 
@@ -56,6 +57,8 @@ class EvaluationOptions:
         cull_every: cull with every k-th frame of the run (1 = all, as the paper).
         max_edge: subdivide longer mesh edges (metres) before culling; None = no.
         device: where culling projects points.
+        data: the run's sequence where it moved (its fingerprint must still match the
+            run's input.json); None = config.yaml's data.path.
     """
 
     gt_mesh: Path | None = None
@@ -68,6 +71,7 @@ class EvaluationOptions:
     cull_every: int = 1
     max_edge: float | None = None
     device: str = "cpu"
+    data: Path | None = None
 
 
 EVALUATION_KEYS = (
@@ -163,7 +167,7 @@ def _reconstruction(
         raise InputError(run.mesh, "not found", f"extract it with `eslam mesh {run.root}`")
     reconstruction = read_mesh_ply(run.mesh)
     ground_truth = read_mesh(options.gt_mesh)
-    sequence = open_sequence(config.data)
+    sequence = _run_sequence(run, config, options.data)
     frames = np.arange(0, min(len(sequence), len(estimated)), options.cull_every)
     cull = CullOptions(config.field.truncation, options.max_edge, options.device)
     rec_culled = _culled(reconstruction, sequence, estimated, frames, options, cull)
@@ -195,6 +199,17 @@ def _reconstruction(
             f"(more than {pixels} pixels of unobserved space, or no common depth)"
         )
     return metrics
+
+
+def _run_sequence(run: RunDirectory, config: ESLAMConfig, data: Path | None) -> RGBDSequence:
+    """The run's sequence (at ``data`` when given), checked to be the input it ran on."""
+    if data is not None:
+        config = dataclasses.replace(
+            config, data=dataclasses.replace(config.data, path=str(Path(data).absolute()))
+        )
+    sequence = open_sequence(config.data)
+    check_same_input(run, sequence)
+    return sequence
 
 
 def _culled(

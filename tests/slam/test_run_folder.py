@@ -145,6 +145,9 @@ def test_resume_finds_moved_data_and_refuses_changed_data(
     assert resumed["ate_rmse_cm"] == pytest.approx(tiny_run.metrics["ate_rmse_cm"], abs=1e-6)
     # eval with a relative GT mesh and the data found through config.yaml's absolute path
     gt_mesh = Path("..") / "moved" / "mesh.ply"
+    wrong = ["--gt-mesh", str(gt_mesh), "--views", "0", "--data", str(changed)]
+    assert main(["eval", str(run), *wrong]) == EXIT_USER_ERROR  # eval checks the data too
+    assert "is not the input the run in" in _one_line(capsys)
     assert main(["eval", str(run), "--gt-mesh", str(gt_mesh), "--samples", "20000",
                  "--views", "0"]) == 0  # fmt: skip
     assert "accuracy_cm" in json.loads((run / "metrics.json").read_text())
