@@ -85,6 +85,8 @@ def process_alive(pid: int) -> bool:
     """Whether a process ``pid`` exists on this machine (signal 0 checks, sends nothing)."""
     if pid <= 0:
         return False
+    if os.name == "nt":  # signal 0 is CTRL_C_EVENT there: never probe, assume it lives
+        return True
     try:
         os.kill(pid, 0)
     except ProcessLookupError:
@@ -156,7 +158,15 @@ def acquire(run_dir: Path, command: str) -> HeldLock:
     me = this_process()
     replaced = None
     for _ in range(3):
-        if _create(path, me):
+        try:
+            created = _create(path, me)
+        except OSError as error:  # a read-only folder, a full disk: nothing was written
+            raise InputError(
+                path,
+                f"cannot create the run's lock ({error.strerror or error})",
+                "check that the run folder is writable and its disk has space",
+            ) from None
+        if created:
             return HeldLock(path, me, replaced)
         owner = read_owner(path)
         if not is_stale(owner):

@@ -3,10 +3,12 @@ when its process is gone, released on every exit."""
 
 from __future__ import annotations
 
+import errno
 import json
 import socket
 import subprocess
 import sys
+import tempfile
 from pathlib import Path
 
 import pytest
@@ -86,3 +88,14 @@ def test_release_leaves_another_runs_lock(tmp_path: Path) -> None:
     _write_lock(tmp_path, 1, "another-host.example")  # taken over by someone else
     release(lock)
     assert (tmp_path / LOCK_NAME).exists()
+
+
+def test_a_read_only_folder_is_one_line(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    def read_only(*args, **kwargs):
+        raise OSError(errno.EROFS, "Read-only file system")
+
+    monkeypatch.setattr(tempfile, "mkstemp", read_only)
+    with pytest.raises(InputError, match=r"run.lock: cannot create the run's lock") as caught:
+        acquire(tmp_path, "eslam run")
+    message = str(caught.value)
+    assert "\n" not in message and "Read-only file system" in message and "writable" in message
