@@ -32,7 +32,7 @@ from eslam.config import ESLAMConfig
 from eslam.config.device import resolve_device
 from eslam.data import RGBDSequence, open_sequence
 from eslam.data.source import FrameSource, SequenceSource, source_length
-from eslam.errors import ConfigError, InputError
+from eslam.errors import ConfigError, InputError, RunInterrupted
 from eslam.field.scene_field import SceneField
 from eslam.render.rays import camera_directions
 from eslam.slam.bounds_policy import (
@@ -69,7 +69,7 @@ from eslam.slam.state import (
     new_field,
     quality_row,
 )
-from eslam.slam.stops import save_on_failure, stopped_error
+from eslam.slam.stops import interrupted_early, save_on_failure, stopped_error
 from eslam.slam.trackers import make_tracker, predict_pose
 from eslam.slam.tracking import TrackingQuality
 from eslam.slam.views import make_view
@@ -426,43 +426,49 @@ def run_slam(
     source, sequence = _open_input(config, source)
     intrinsics = source.intrinsics if source is not None else sequence.intrinsics  # type: ignore[union-attr]
     folder = open_run_folder(run_dir, config, sequence, resume, overwrite)
-    with folder as (run, lock), run_log(run.log) as run_logger:
-        log_lock_takeover(lock, run_logger)
-        if resume and run.map.is_file():
-            state = load_state(run.map, config, device)
-            check_saved_frames(sequence, state.next_frame, run.map)
-        else:
-            if resume:
-                run_logger.info("no frame was saved before: the run starts at frame 0")
-            state = initial_state(config, intrinsics, device)
-        memory = PeakMemory(device)
-        writer = RunWriter(run, config, memory)
-        writer.saved_frames = state.next_frame
-        try:
-            if sequence is not None:
-                source = SequenceSource(sequence, start=state.next_frame)
-            assert source is not None
-            remaining = source_length(source)
-            total = None if remaining is None else state.next_frame + remaining
-            memory.start()
-            progress = ProgressObserver(config.output.progress)
-            everyone = Observers([writer, LogObserver(run_logger), progress, *observers])
-            loop = RunLoop(config, state, device, everyone, source.name, run_logger)
-            if resume and not state.last_mapped and isinstance(source, SequenceSource):
-                loop.last_frame = source.frame(state.next_frame - 1)
-            everyone.on_start(
-                RunStart(config, run.root, state, device, source.name, remaining, resume)
-            )
+    writer: RunWriter | None = None
+    try:
+        with folder as (run, lock), run_log(run.log) as run_logger:
+            log_lock_takeover(lock, run_logger)
+            if resume and run.map.is_file():
+                state = load_state(run.map, config, device)
+                check_saved_frames(sequence, state.next_frame, run.map)
+            else:
+                if resume:
+                    run_logger.info("no frame was saved before: the run starts at frame 0")
+                state = initial_state(config, intrinsics, device)
+            memory = PeakMemory(device)
+            writer = RunWriter(run, config, memory)
+            writer.saved_frames = state.next_frame
             try:
-                end = loop.run(source, total, stop_after)
+                if sequence is not None:
+                    source = SequenceSource(sequence, start=state.next_frame)
+                assert source is not None
+                remaining = source_length(source)
+                total = None if remaining is None else state.next_frame + remaining
+                memory.start()
+                progress = ProgressObserver(config.output.progress)
+                everyone = Observers([writer, LogObserver(run_logger), progress, *observers])
+                loop = RunLoop(config, state, device, everyone, source.name, run_logger)
+                if resume and not state.last_mapped and isinstance(source, SequenceSource):
+                    loop.last_frame = source.frame(state.next_frame - 1)
+                everyone.on_start(
+                    RunStart(config, run.root, state, device, source.name, remaining, resume)
+                )
+                try:
+                    end = loop.run(source, total, stop_after)
+                except BaseException as error:
+                    save_on_failure(everyone, error, state.next_frame, run_logger)
+                    raise
+                everyone.on_finish(end)
             except BaseException as error:
-                save_on_failure(everyone, error, state.next_frame, run_logger)
-                raise
-            everyone.on_finish(end)
-        except BaseException as error:
-            stopped = stopped_error(error, writer.saved_frames, run.root)
-            if stopped is error:
-                raise
-            raise stopped from error
-        poses = state.trajectory.poses.detach().cpu().double().numpy()
-        return RunResult(run_dir=run.root, poses=poses, metrics=dict(writer.metrics or {}))
+                stopped = stopped_error(error, writer.saved_frames, run.root)
+                if stopped is error:
+                    raise
+                raise stopped from error
+            poses = state.trajectory.poses.detach().cpu().double().numpy()
+            return RunResult(run_dir=run.root, poses=poses, metrics=dict(writer.metrics or {}))
+    except KeyboardInterrupt as interrupt:
+        if writer is not None or isinstance(interrupt, RunInterrupted):
+            raise  # already said what was saved
+        raise interrupted_early(interrupt, Path(run_dir), resume) from interrupt

@@ -15,6 +15,7 @@ from pathlib import Path
 import torch
 
 from eslam.errors import ESLAMError, RunInterrupted, RunStopped
+from eslam.io.run_dir import RunDirectory
 from eslam.slam.observers import Observers
 
 
@@ -49,3 +50,15 @@ def stopped_error(error: BaseException, frames: int, run_dir: Path) -> BaseExcep
         f"(continue with `eslam resume {run_dir}`)"
     )
     return error
+
+
+def interrupted_early(
+    interrupt: KeyboardInterrupt, run_dir: Path, resume: bool
+) -> KeyboardInterrupt:
+    """What to raise for Ctrl-C / SIGTERM while a run folder is being opened, before the
+    run's state exists: nothing was processed, so a new run is resumed from frame 0 and a
+    resumed one from where it was, once config.yaml is there (else no run folder exists
+    yet and the interruption is raised as it is)."""
+    if not RunDirectory(run_dir).config.is_file():
+        return interrupt
+    return RunInterrupted(None if resume else 0, run_dir)

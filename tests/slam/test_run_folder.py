@@ -5,9 +5,11 @@ from __future__ import annotations
 
 import json
 import shutil
+import signal
 import socket
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -176,3 +178,47 @@ def test_a_live_run_holds_its_folder_and_a_dead_ones_lock_is_taken_over(
     assert main(["resume", str(run)]) == 0
     assert f"took over the lock {run / LOCK_NAME}" in (run / "log.txt").read_text()
     assert not (run / LOCK_NAME).exists()
+
+
+def _start(args: list[str]) -> subprocess.Popen:
+    code = "import sys; from eslam.cli import main; sys.exit(main(sys.argv[1:]))"
+    return subprocess.Popen(
+        [sys.executable, "-c", code, *args],
+        stderr=subprocess.PIPE,
+        text=True,
+        cwd=Path(__file__).resolve().parents[2],
+    )
+
+
+def _wait_for(path: Path, process: subprocess.Popen, timeout: float = 300.0) -> None:
+    deadline = time.monotonic() + timeout
+    while not path.exists():
+        assert process.poll() is None, process.communicate()[1]
+        assert time.monotonic() < deadline, f"{path} did not appear"
+        time.sleep(0.05)
+
+
+@pytest.mark.skipif(sys.platform == "win32", reason="POSIX signals")
+def test_sigterm_stops_a_real_run_with_its_frames_saved(
+    tiny_sequence: Path, tmp_path: Path
+) -> None:
+    # before the first frame is complete: nothing to save, the message names resume
+    early = tmp_path / "early"
+    process = _start(_run_args(tiny_sequence, early, "threads=1"))
+    _wait_for(early / "config.yaml", process)
+    process.send_signal(signal.SIGTERM)
+    _, err = process.communicate(timeout=120)
+    assert process.returncode == EXIT_INTERRUPTED, err
+    assert f"(continue with `eslam resume {early}`)" in err and "Traceback" not in err
+    assert not (early / "map.pt").exists() and not (early / LOCK_NAME).exists()
+    # after the first checkpoint (frame 2): the completed frames are saved, lock released
+    late = tmp_path / "late"
+    process = _start(_run_args(tiny_sequence, late, "threads=1", "output.checkpoint_every=2"))
+    _wait_for(late / "map.pt", process)
+    process.send_signal(signal.SIGTERM)
+    _, err = process.communicate(timeout=120)
+    assert process.returncode == EXIT_INTERRUPTED, err
+    assert "saved in" in err and f"(continue with `eslam resume {late}`)" in err
+    frames = json.loads((late / "metrics.json").read_text())["frames"]
+    assert len(np.loadtxt(late / "trajectory.txt", ndmin=2)) == frames >= 2
+    assert not (late / LOCK_NAME).exists()

@@ -9,7 +9,7 @@ import pytest
 
 from eslam.errors import InputError, RunInterrupted, RunStopped
 from eslam.slam.observers import Observers, RunObserverBase
-from eslam.slam.stops import save_on_failure, stopped_error
+from eslam.slam.stops import interrupted_early, save_on_failure, stopped_error
 
 RUN = Path("runs/room0")
 
@@ -61,3 +61,17 @@ def test_a_failing_save_never_hides_the_error(caplog: pytest.LogCaptureFixture) 
     with caplog.at_level(logging.ERROR, logger="eslam.test_stops"):
         save_on_failure(Observers([FullDisk()]), KeyboardInterrupt(), 5, logger)
     assert "could not save the completed frames: OSError" in caplog.text
+
+
+def test_an_interruption_while_the_folder_opens(tmp_path: Path) -> None:
+    interrupt = KeyboardInterrupt()
+    # no config.yaml yet: no run folder exists, nothing to resume
+    assert interrupted_early(interrupt, tmp_path, resume=False) is interrupt
+    (tmp_path / "config.yaml").write_text("run")
+    fresh = interrupted_early(interrupt, tmp_path, resume=False)
+    assert "before the first frame was complete" in str(fresh)
+    resumed = interrupted_early(interrupt, tmp_path, resume=True)
+    assert str(resumed) == (
+        f"interrupted before resuming, its saved frames in {tmp_path} unchanged "
+        f"(continue with `eslam resume {tmp_path}`)"
+    )
