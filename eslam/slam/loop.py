@@ -400,13 +400,16 @@ def run_slam(
     Recorded input (``config.data``, when ``source`` is None) is checked before
     anything is written (the sequence opens, its first and last frames read and pass
     the reader's checks), so bad input leaves an earlier run in ``run_dir`` untouched.
+    The run holds the folder's lock while it writes, and stores ``data.path`` absolute
+    and the input's fingerprint (:mod:`eslam.slam.run_folder`).
 
     Args:
         config: the fully resolved configuration (saved as config.yaml).
         run_dir: output folder (created); see :class:`~eslam.io.run_dir.RunDirectory`.
-        resume: continue from ``run_dir/map.pt`` instead of starting afresh. A recorded
-            sequence continues at the next frame; a given ``source`` must yield the
-            frames that follow the checkpoint.
+        resume: continue the run in ``run_dir``: from map.pt, or from frame 0 when it
+            stopped before saving one. A recorded sequence must match the run's
+            input.json and continues at the next frame; a given ``source`` must yield
+            the frames that follow the checkpoint.
         stop_after: stop (checkpointed) after this many frames in total, as an
             interruption would; used by tests of ``resume``.
         overwrite: start a new run in a folder that already holds one (its files are
@@ -417,9 +420,11 @@ def run_slam(
             writer, the log and the progress bar.
 
     Raises:
-        ConfigError, InputError: bad configuration or input, before any file is written.
-        RunStopped: an error after frames were processed (they are saved; resume).
-        RunInterrupted: Ctrl-C (or the CLI's SIGTERM) after frames were processed.
+        ConfigError, InputError: bad configuration or input, before any file is written;
+            also a live run holding ``run_dir`` or (resume) a sequence that changed.
+        RunStopped: an error once the run folder was opened (the completed frames are
+            saved; the message names ``eslam resume``).
+        RunInterrupted: Ctrl-C (or the CLI's SIGTERM) once the run folder was opened.
     """
     device = resolve_device(config.device)
     config = absolute_data_path(config)
