@@ -181,7 +181,10 @@ def acquire(run_dir: Path, command: str) -> HeldLock:
     if owner is not None and owner.host != socket.gethostname():
         fix = f"wait for it to finish; if that run is gone, delete {path}"
     else:
-        fix = f"wait for it to finish or stop it, or choose another folder for {command}"
+        fix = (
+            f"wait for it to finish or stop it, or choose another folder for {command}; "
+            f"if no such run is going (its pid reused), delete {path}"
+        )
     raise InputError(Path(run_dir), f"a run is still writing this folder ({holder})", fix)
 
 
