@@ -26,6 +26,9 @@ os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 EXIT_USER_ERROR = 2
 """Exit status of a run stopped by bad input, bad configuration or a bad argument."""
 
+EXIT_INTERRUPTED = 130
+"""Exit status of a command stopped by Ctrl-C or SIGTERM (128 + SIGINT, as shells do)."""
+
 
 class _Parser(argparse.ArgumentParser):
     """ArgumentParser whose errors are one line (no usage block) naming the fix."""
@@ -154,15 +157,26 @@ def _command_run(args: argparse.Namespace) -> int:
 
 
 def _command_resume(args: argparse.Namespace) -> int:
+    import dataclasses
+    import os
+
     from eslam.config import load_config
     from eslam.errors import InputError
     from eslam.io.run_dir import RunDirectory
     from eslam.slam.loop import run_slam
 
     run = RunDirectory(Path(args.run_dir))
-    if not run.map.is_file():
-        raise InputError(run.map, "not found: nothing to resume", "start the run with `eslam run`")
+    if not run.config.is_file():
+        problem = "not found: not a run folder" if run.root.is_dir() else "run folder not found"
+        raise InputError(
+            run.config if run.root.is_dir() else run.root,
+            problem,
+            "pass the folder of a run started with `eslam run CONFIG --out RUN_DIR`",
+        )
     config = load_config(run.config)
+    if args.data is not None:  # the data moved: its fingerprint must still match
+        data = dataclasses.replace(config.data, path=os.path.abspath(args.data))
+        config = dataclasses.replace(config, data=data)
     _process_settings(config)
     _print_metrics(run_slam(config, run.root, resume=True))
     return 0
@@ -206,7 +220,7 @@ def _command_eval(args: argparse.Namespace) -> int:
     from eslam.workflows.evaluate_run import EvaluationOptions, evaluate_run
 
     options = EvaluationOptions(
-        gt_mesh=Path(args.gt_mesh) if args.gt_mesh else None,
+        gt_mesh=Path(args.gt_mesh).absolute() if args.gt_mesh else None,
         protocol=args.protocol,
         samples=args.samples,
         exact=args.exact,
@@ -215,6 +229,7 @@ def _command_eval(args: argparse.Namespace) -> int:
         cull_every=args.cull_every,
         max_unobserved_fraction=args.max_unobserved,
         device=args.device,
+        data=Path(args.data).absolute() if args.data else None,
     )
     metrics = evaluate_run(args.run_dir, options)
     print(f"wrote {Path(args.run_dir) / 'metrics.json'} and report.md")
@@ -445,10 +460,18 @@ def build_parser() -> argparse.ArgumentParser:
 
     resume = commands.add_parser(
         "resume",
-        help="continue an interrupted run from its map.pt",
-        description="Continue the run in RUN_DIR from its last checkpoint (map.pt).",
+        help="continue an interrupted run from its last checkpoint",
+        description=(
+            "Continue the run in RUN_DIR from its last checkpoint (map.pt), or from frame 0 "
+            "when it stopped before saving one. The sequence must be the one the run "
+            "started on (frame count, first and last files, camera: input.json); "
+            "--data points to it where it moved. See docs/reliability.md."
+        ),
     )
     resume.add_argument("run_dir", metavar="RUN_DIR", help="folder of the interrupted run")
+    resume.add_argument(
+        "--data", metavar="PATH", help="the run's sequence, where it moved (sets data.path)"
+    )
     resume.set_defaults(handler=_command_resume)
 
     mesh = commands.add_parser(
@@ -496,6 +519,9 @@ def build_parser() -> argparse.ArgumentParser:
     evaluation.add_argument("run_dir", metavar="RUN_DIR", help="a finished run folder")
     evaluation.add_argument("--gt-mesh", help="ground-truth mesh in the poses' world frame")
     evaluation.add_argument(
+        "--data", metavar="PATH", help="the run's sequence, where it moved (default: config.yaml's)"
+    )
+    evaluation.add_argument(
         "--protocol", choices=("eslam", "nice"), default="eslam", help="culling (default eslam)"
     )
     evaluation.add_argument(
@@ -542,9 +568,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"eslam {args.command}: error: {error}", file=sys.stderr)
         return EXIT_USER_ERROR
     except KeyboardInterrupt as interrupt:
-        detail = f": {interrupt}" if str(interrupt) else ""
-        print(f"eslam {args.command}: interrupted{detail}", file=sys.stderr)
-        return 130
+        detail = str(interrupt) or "interrupted"
+        if not detail.startswith("interrupted"):
+            detail = f"interrupted: {detail}"
+        print(f"eslam {args.command}: {detail}", file=sys.stderr)
+        return EXIT_INTERRUPTED
     finally:
         if previous is not None:
             signal.signal(signal.SIGTERM, previous)

@@ -53,9 +53,16 @@ class RunStopped(ESLAMError):
         self.run_dir = Path(run_dir)
         reason = str(cause) if isinstance(cause, ESLAMError) else _describe(cause)
         super().__init__(
-            f"{reason}; the run stopped after {frames} frames, saved in {self.run_dir} "
+            f"{reason}; {_saved(frames, self.run_dir)} "
             f"(fix the cause, then continue with `eslam resume {self.run_dir}`)"
         )
+
+
+def _saved(frames: int, run_dir: Path) -> str:
+    """What a stopped run kept, for messages."""
+    if frames == 0:
+        return f"the run in {run_dir} stopped before its first frame was complete"
+    return f"the run stopped after {frames} frames, saved in {run_dir}"
 
 
 def _describe(error: BaseException) -> str:
@@ -67,14 +74,18 @@ class RunInterrupted(KeyboardInterrupt):
     """A run was interrupted (Ctrl-C, SIGTERM) after its completed frames were saved.
 
     Args:
-        frames: frames completed and saved in the run folder.
+        frames: frames completed and saved in the run folder; None when the run was
+            interrupted while resuming, before it changed any saved frame.
         run_dir: the run folder.
     """
 
-    def __init__(self, frames: int, run_dir: str | Path) -> None:
+    def __init__(self, frames: int | None, run_dir: str | Path) -> None:
         self.frames = frames
         self.run_dir = Path(run_dir)
-        super().__init__(
-            f"interrupted after {frames} frames, saved in {self.run_dir} "
-            f"(continue with `eslam resume {self.run_dir}`)"
-        )
+        if frames is None:
+            done = f"before resuming, its saved frames in {self.run_dir} unchanged"
+        elif frames == 0:
+            done = "before the first frame was complete"
+        else:
+            done = f"after {frames} frames, saved in {self.run_dir}"
+        super().__init__(f"interrupted {done} (continue with `eslam resume {self.run_dir}`)")

@@ -280,3 +280,7 @@ class FileSequence:
     def timestamps(self) -> np.ndarray:
         """(N,) float64 seconds, or the frame numbers where the dataset has no time stamps."""
         return self._times.copy()
+
+    def frame_files(self, index: int) -> tuple[Path, Path]:
+        """The (colour, depth) files of frame ``index``, e.g. to fingerprint the input."""
+        return self._colour_paths[index], self._depth_paths[index]

@@ -76,6 +76,14 @@ class FrameSelection:
         """(N,) timestamps of the selected frames (seconds, or frame numbers)."""
         return sequence_timestamps(self.sequence)[self.positions]
 
+    def frame_files(self, index: int) -> tuple[Path, Path]:
+        """The (colour, depth) files of selected frame ``index`` (the reader's, if it has them).
+
+        Raises:
+            AttributeError: the reader does not read frames from files.
+        """
+        return self.sequence.frame_files(self.positions[index])  # type: ignore[attr-defined]
+
 
 def sequence_timestamps(sequence: RGBDSequence) -> np.ndarray:
     """(N,) timestamps of every frame: the reader's ``timestamps()`` when it has one.

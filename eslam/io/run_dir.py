@@ -22,9 +22,15 @@ import numpy as np
 
 from eslam.atomic import write_text
 from eslam.errors import InputError
+from eslam.io.run_lock import LOCK_NAME
 
-RUN_MARKERS = ("config.yaml", "map.pt")
-"""Files whose presence means a folder already holds a run."""
+RUN_MARKERS = ("map.pt", "trajectory.txt", "metrics.json", "mesh.ply")
+"""Files whose presence means a folder holds a run's saved work (frames, results).
+
+config.yaml alone is no such marker: a run stopped before its first frame was complete
+saved nothing, and its folder may be started again (``eslam run``) or resumed from frame 0
+(``eslam resume``) without ``--overwrite``.
+"""
 
 
 @dataclass(frozen=True)
@@ -85,15 +91,57 @@ class RunDirectory:
         """log.txt: the run's log."""
         return self.root / "log.txt"
 
+    @property
+    def input(self) -> Path:
+        """input.json: where the input is and its fingerprint (resume checks it)."""
+        return self.root / "input.json"
+
+    @property
+    def lock(self) -> Path:
+        """run.lock: held by the run writing the folder (eslam.io.run_lock)."""
+        return self.root / LOCK_NAME
+
     def existing_markers(self) -> list[str]:
         """Names of the files in :data:`RUN_MARKERS` present in the folder."""
         return [name for name in RUN_MARKERS if (self.root / name).exists()]
 
 
+def check_run_folder(path: str | Path) -> RunDirectory:
+    """The paths of run folder ``path``, checked to be a folder or absent (nothing is made).
+
+    Raises:
+        InputError: ``path`` is a file.
+    """
+    run = RunDirectory(Path(path))
+    if run.root.exists() and not run.root.is_dir():
+        raise InputError(run.root, "exists and is not a folder", "choose another --out")
+    return run
+
+
+def check_new_run(run: RunDirectory, overwrite: bool = False) -> None:
+    """Refuse to start a new run in a folder that holds saved work, unless ``overwrite``.
+
+    A folder with only config.yaml (and log.txt) holds a run that stopped before its
+    first frame was complete: it saved nothing, so it is started again freely.
+
+    Raises:
+        InputError: the folder holds saved work and ``overwrite`` is False (the message
+            offers ``--overwrite`` and ``eslam resume``).
+    """
+    markers = run.existing_markers()
+    if markers and not overwrite:
+        raise InputError(
+            run.root,
+            f"already holds a run ({', '.join(markers)})",
+            "choose another --out, pass --overwrite, or continue it with "
+            f"`eslam resume {run.root}`",
+        )
+
+
 def prepare_run_directory(path: str | Path, overwrite: bool = False) -> RunDirectory:
     """Create (if needed) the folder of a new run and return its paths.
 
-    A folder that already holds a run (a ``config.yaml`` or ``map.pt``) is refused
+    A folder that already holds a run's saved work (:data:`RUN_MARKERS`) is refused
     unless ``overwrite``. Even then nothing is deleted: each output of the new run
     replaces the old file atomically when it is written, so stopping early leaves a
     mix of old and new files rather than a half-empty folder.
@@ -101,16 +149,8 @@ def prepare_run_directory(path: str | Path, overwrite: bool = False) -> RunDirec
     Raises:
         InputError: ``path`` is a file, or holds a run and ``overwrite`` is False.
     """
-    run = RunDirectory(Path(path))
-    if run.root.exists() and not run.root.is_dir():
-        raise InputError(run.root, "exists and is not a folder", "choose another --out")
-    markers = run.existing_markers()
-    if markers and not overwrite:
-        raise InputError(
-            run.root,
-            f"already holds a run ({', '.join(markers)})",
-            f"choose another --out, pass --overwrite, or continue it with `eslam resume {path}`",
-        )
+    run = check_run_folder(path)
+    check_new_run(run, overwrite)
     run.root.mkdir(parents=True, exist_ok=True)
     return run
 

@@ -68,9 +68,10 @@ def load_run(run_dir: str | Path) -> SavedRun:
             run.config, "not found: not a run folder", "pass a folder written by `eslam run`"
         )
     if not run.trajectory.is_file():
-        fix = f"continue it with `eslam resume {run.root}`" if run.map.is_file() else None
         raise InputError(
-            run.trajectory, "not found: the run has not finished", fix or "run it again"
+            run.trajectory,
+            "not found: the run saved no frame yet",
+            f"continue it with `eslam resume {run.root}`",
         )
     timestamps, poses = read_tum_trajectory(run.trajectory, allow_missing=True)
     gt_timestamps = gt_poses = None

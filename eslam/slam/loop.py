@@ -28,13 +28,12 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from eslam.config import ESLAMConfig, save_config
+from eslam.config import ESLAMConfig
 from eslam.config.device import resolve_device
 from eslam.data import RGBDSequence, open_sequence
 from eslam.data.source import FrameSource, SequenceSource, source_length
-from eslam.errors import ConfigError, ESLAMError, InputError, RunInterrupted, RunStopped
+from eslam.errors import ConfigError, InputError, RunInterrupted
 from eslam.field.scene_field import SceneField
-from eslam.io.run_dir import RunDirectory, prepare_run_directory
 from eslam.render.rays import camera_directions
 from eslam.slam.bounds_policy import (
     bound_from_frame,
@@ -55,6 +54,12 @@ from eslam.slam.observers import (
 )
 from eslam.slam.progress import ProgressObserver, finite_ate_pairs
 from eslam.slam.resources import PeakMemory, device_clock
+from eslam.slam.run_folder import (
+    absolute_data_path,
+    check_saved_frames,
+    log_lock_takeover,
+    open_run_folder,
+)
 from eslam.slam.run_writer import RunWriter
 from eslam.slam.state import (
     FrameMark,
@@ -64,6 +69,7 @@ from eslam.slam.state import (
     new_field,
     quality_row,
 )
+from eslam.slam.stops import interrupted_early, save_on_failure, stopped_error
 from eslam.slam.trackers import make_tracker, predict_pose
 from eslam.slam.tracking import TrackingQuality
 from eslam.slam.views import make_view
@@ -394,13 +400,16 @@ def run_slam(
     Recorded input (``config.data``, when ``source`` is None) is checked before
     anything is written (the sequence opens, its first and last frames read and pass
     the reader's checks), so bad input leaves an earlier run in ``run_dir`` untouched.
+    The run holds the folder's lock while it writes, and stores ``data.path`` absolute
+    and the input's fingerprint (:mod:`eslam.slam.run_folder`).
 
     Args:
         config: the fully resolved configuration (saved as config.yaml).
         run_dir: output folder (created); see :class:`~eslam.io.run_dir.RunDirectory`.
-        resume: continue from ``run_dir/map.pt`` instead of starting afresh. A recorded
-            sequence continues at the next frame; a given ``source`` must yield the
-            frames that follow the checkpoint.
+        resume: continue the run in ``run_dir``: from map.pt, or from frame 0 when it
+            stopped before saving one. A recorded sequence must match the run's
+            input.json and continues at the next frame; a given ``source`` must yield
+            the frames that follow the checkpoint.
         stop_after: stop (checkpointed) after this many frames in total, as an
             interruption would; used by tests of ``resume``.
         overwrite: start a new run in a folder that already holds one (its files are
@@ -411,53 +420,60 @@ def run_slam(
             writer, the log and the progress bar.
 
     Raises:
-        ConfigError, InputError: bad configuration or input, before any file is written.
-        RunStopped: an error after frames were processed (they are saved; resume).
-        RunInterrupted: Ctrl-C (or the CLI's SIGTERM) after frames were processed.
+        ConfigError, InputError: bad configuration or input, before any file is written;
+            also a live run holding ``run_dir`` or (resume) a sequence that changed.
+        RunStopped: an error once the run folder was opened (the completed frames are
+            saved; the message names ``eslam resume``).
+        RunInterrupted: Ctrl-C (or the CLI's SIGTERM) once the run folder was opened.
     """
     device = resolve_device(config.device)
+    config = absolute_data_path(config)
     source, sequence = _open_input(config, source)
     intrinsics = source.intrinsics if source is not None else sequence.intrinsics  # type: ignore[union-attr]
-    run = RunDirectory(Path(run_dir)) if resume else prepare_run_directory(run_dir, overwrite)
-    with run_log(run.log) as run_logger:
-        if resume:
-            state = load_state(run.map, config, device)
-        else:
-            save_config(config, run.config)
-            state = initial_state(config, intrinsics, device)
-        if sequence is not None:
-            source = SequenceSource(sequence, start=state.next_frame)
-        assert source is not None
-        remaining = source_length(source)
-        total = None if remaining is None else state.next_frame + remaining
-        memory = PeakMemory(device)
-        memory.start()
-        writer = RunWriter(run, config, memory)
-        everyone = Observers(
-            [writer, LogObserver(run_logger), ProgressObserver(config.output.progress), *observers]
-        )
-        loop = RunLoop(config, state, device, everyone, source.name, run_logger)
-        if resume and not state.last_mapped and isinstance(source, SequenceSource):
-            loop.last_frame = source.frame(state.next_frame - 1)
-        everyone.on_start(RunStart(config, run.root, state, device, source.name, remaining, resume))
-        try:
-            end = loop.run(source, total, stop_after)
-        except BaseException as error:
-            everyone.on_failure(error, state.next_frame)
-            stopped = _stopped(error, state.next_frame, run.root)
-            if stopped is error:
-                raise
-            raise stopped from error
-        everyone.on_finish(end)
-        poses = state.trajectory.poses.detach().cpu().double().numpy()
-        return RunResult(run_dir=run.root, poses=poses, metrics=dict(writer.metrics or {}))
-
-
-def _stopped(error: BaseException, frames: int, run_dir: Path) -> BaseException:
-    """What to raise for ``error`` after ``frames`` frames were saved in ``run_dir``."""
-    if frames == 0:
-        return error
-    if isinstance(error, KeyboardInterrupt):
-        return RunInterrupted(frames, run_dir)
-    resumable = isinstance(error, ESLAMError | OSError | MemoryError | torch.cuda.OutOfMemoryError)
-    return RunStopped(error, frames, run_dir) if resumable else error
+    folder = open_run_folder(run_dir, config, sequence, resume, overwrite)
+    writer: RunWriter | None = None
+    try:
+        with folder as (run, lock), run_log(run.log) as run_logger:
+            log_lock_takeover(lock, run_logger)
+            if resume and run.map.is_file():
+                state = load_state(run.map, config, device)
+                check_saved_frames(sequence, state.next_frame, run.map)
+            else:
+                if resume:
+                    run_logger.info("no frame was saved before: the run starts at frame 0")
+                state = initial_state(config, intrinsics, device)
+            memory = PeakMemory(device)
+            writer = RunWriter(run, config, memory)
+            writer.saved_frames = state.next_frame
+            try:
+                if sequence is not None:
+                    source = SequenceSource(sequence, start=state.next_frame)
+                assert source is not None
+                remaining = source_length(source)
+                total = None if remaining is None else state.next_frame + remaining
+                memory.start()
+                progress = ProgressObserver(config.output.progress)
+                everyone = Observers([writer, LogObserver(run_logger), progress, *observers])
+                loop = RunLoop(config, state, device, everyone, source.name, run_logger)
+                if resume and not state.last_mapped and isinstance(source, SequenceSource):
+                    loop.last_frame = source.frame(state.next_frame - 1)
+                everyone.on_start(
+                    RunStart(config, run.root, state, device, source.name, remaining, resume)
+                )
+                try:
+                    end = loop.run(source, total, stop_after)
+                except BaseException as error:
+                    save_on_failure(everyone, error, state.next_frame, run_logger)
+                    raise
+                everyone.on_finish(end)
+            except BaseException as error:
+                stopped = stopped_error(error, writer.saved_frames, run.root)
+                if stopped is error:
+                    raise
+                raise stopped from error
+            poses = state.trajectory.poses.detach().cpu().double().numpy()
+            return RunResult(run_dir=run.root, poses=poses, metrics=dict(writer.metrics or {}))
+    except KeyboardInterrupt as interrupt:
+        if writer is not None or isinstance(interrupt, RunInterrupted):
+            raise  # already said what was saved
+        raise interrupted_early(interrupt, Path(run_dir), resume) from interrupt

@@ -2,7 +2,8 @@
 
 Every ``output.checkpoint_every`` frames, on a failure and at the end it writes map.pt
 (everything needed to resume), trajectory.txt / trajectory_gt.txt (the frames so far)
-and timings.json; at the end also metrics.json and, when the stream ended, mesh.ply.
+and timings.json; on a failure and at the end also metrics.json (so ``eslam eval``
+scores an interrupted run's frames too) and, when the stream ended, mesh.ply.
 Every file is written atomically, so a crash leaves the last complete version.
 """
 
@@ -62,6 +63,8 @@ class RunWriter(RunObserverBase):
 
     Attributes:
         metrics: metrics.json's contents once the run finished (None before).
+        saved_frames: frames in the last checkpoint written (what a resume continues
+            from; the caller sets it to a resumed checkpoint's frames).
     """
 
     def __init__(self, run: RunDirectory, config: ESLAMConfig, memory: PeakMemory) -> None:
@@ -70,6 +73,7 @@ class RunWriter(RunObserverBase):
         self.memory = memory
         self.state: SLAMState | None = None
         self.metrics: dict | None = None
+        self.saved_frames = 0
 
     def on_start(self, start: RunStart) -> None:
         self.state = start.state
@@ -95,6 +99,11 @@ class RunWriter(RunObserverBase):
     def on_failure(self, error: BaseException, frames: int) -> None:
         if self.state is not None and frames > 0:
             self.checkpoint()
+            state = self._state()
+            write_json(
+                self.run.metrics,
+                run_metrics(state, str(self.memory.device), self.memory.peak_mb()),
+            )
 
     def _state(self) -> SLAMState:
         if self.state is None:
@@ -105,6 +114,7 @@ class RunWriter(RunObserverBase):
         """map.pt, the trajectory so far and timings.json (atomically, in that order)."""
         state = self._state()
         save_state(self.run.map, state)
+        self.saved_frames = state.next_frame
         trajectory = state.trajectory
         timestamps = trajectory.timestamps()
         poses = trajectory.poses.detach().cpu().double().numpy()

@@ -36,6 +36,7 @@ from eslam.io.mesh_files import read_mesh, read_mesh_ply, write_mesh_ply
 from eslam.io.run_dir import RunDirectory, write_json
 from eslam.io.trajectory import read_trajectory
 from eslam.mesh.cull import CullCameras, CullOptions, cull_mesh
+from eslam.slam.run_folder import check_same_input
 from eslam.types import TriangleMesh
 from eslam.viz.plots import plot_trajectories, plot_translation_error
 
@@ -56,6 +57,8 @@ class EvaluationOptions:
         cull_every: cull with every k-th frame of the run (1 = all, as the paper).
         max_edge: subdivide longer mesh edges (metres) before culling; None = no.
         device: where culling projects points.
+        data: the run's sequence where it moved (its fingerprint must still match the
+            run's input.json); None = config.yaml's data.path.
     """
 
     gt_mesh: Path | None = None
@@ -68,6 +71,7 @@ class EvaluationOptions:
     cull_every: int = 1
     max_edge: float | None = None
     device: str = "cpu"
+    data: Path | None = None
 
 
 EVALUATION_KEYS = (
@@ -97,11 +101,18 @@ def evaluate_run(run_dir: str | Path, options: EvaluationOptions) -> dict[str, o
         InputError: not a finished run folder, a missing mesh, or an unreadable GT mesh.
     """
     run = RunDirectory(Path(run_dir))
-    for path in (run.config, run.trajectory, run.metrics):
-        if not path.is_file():
-            raise InputError(path, "not found: not a finished run folder", "run `eslam run` first")
+    if not run.config.is_file():
+        raise InputError(run.config, "not found: not a run folder", "run `eslam run` first")
+    if not run.trajectory.is_file():
+        raise InputError(
+            run.trajectory,
+            "not found: the run saved no frame yet",
+            f"continue it with `eslam resume {run.root}`",
+        )
     config = load_config(run.config)
-    metrics: dict[str, object] = json.loads(run.metrics.read_text(encoding="utf-8"))
+    metrics: dict[str, object] = {}
+    if run.metrics.is_file():  # a run killed before its first checkpoint's metrics has none
+        metrics = json.loads(run.metrics.read_text(encoding="utf-8"))
     metrics = {k: v for k, v in metrics.items() if k not in EVALUATION_KEYS}
     settings: list[str] = []
     images: list[tuple[str, str]] = []
@@ -156,7 +167,7 @@ def _reconstruction(
         raise InputError(run.mesh, "not found", f"extract it with `eslam mesh {run.root}`")
     reconstruction = read_mesh_ply(run.mesh)
     ground_truth = read_mesh(options.gt_mesh)
-    sequence = open_sequence(config.data)
+    sequence = _run_sequence(run, config, options.data)
     frames = np.arange(0, min(len(sequence), len(estimated)), options.cull_every)
     cull = CullOptions(config.field.truncation, options.max_edge, options.device)
     rec_culled = _culled(reconstruction, sequence, estimated, frames, options, cull)
@@ -188,6 +199,17 @@ def _reconstruction(
             f"(more than {pixels} pixels of unobserved space, or no common depth)"
         )
     return metrics
+
+
+def _run_sequence(run: RunDirectory, config: ESLAMConfig, data: Path | None) -> RGBDSequence:
+    """The run's sequence (at ``data`` when given), checked to be the input it ran on."""
+    if data is not None:
+        config = dataclasses.replace(
+            config, data=dataclasses.replace(config.data, path=str(Path(data).absolute()))
+        )
+    sequence = open_sequence(config.data)
+    check_same_input(run, sequence)
+    return sequence
 
 
 def _culled(

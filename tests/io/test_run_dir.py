@@ -44,7 +44,7 @@ def test_prepare_creates_a_new_folder(tmp_path: Path) -> None:
     assert prepare_run_directory(run.root).root == run.root
 
 
-@pytest.mark.parametrize("marker", ["config.yaml", "map.pt"])
+@pytest.mark.parametrize("marker", ["map.pt", "trajectory.txt", "metrics.json", "mesh.ply"])
 def test_prepare_refuses_an_existing_run(tmp_path: Path, marker: str) -> None:
     (tmp_path / marker).write_text("earlier run")
     with pytest.raises(InputError) as caught:
@@ -53,6 +53,14 @@ def test_prepare_refuses_an_existing_run(tmp_path: Path, marker: str) -> None:
     assert "already holds a run" in message and marker in message
     assert "--overwrite" in message and "eslam resume" in message
     assert (tmp_path / marker).read_text() == "earlier run"
+
+
+def test_a_run_that_saved_no_frame_is_started_again_without_overwrite(tmp_path: Path) -> None:
+    # stopped before its first frame was complete: config.yaml and log.txt, nothing saved
+    (tmp_path / "config.yaml").write_text("earlier run")
+    (tmp_path / "log.txt").write_text("started")
+    assert prepare_run_directory(tmp_path, overwrite=False).root == tmp_path
+    assert RunDirectory(tmp_path).existing_markers() == []
 
 
 def test_prepare_with_overwrite_deletes_nothing(tmp_path: Path) -> None:

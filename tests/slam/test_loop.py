@@ -94,7 +94,11 @@ def test_cli_run_refuses_an_existing_run_and_missing_data(
     assert "data.path is not set (pass --data PATH" in err and "\n" not in err
 
 
-def test_cli_resume_without_a_map(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+def test_cli_resume_of_a_folder_that_is_not_a_run(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
     assert main(["resume", str(tmp_path)]) == EXIT_USER_ERROR
     err = capsys.readouterr().err.strip()
-    assert "map.pt: not found: nothing to resume" in err
+    assert "config.yaml: not found: not a run folder" in err and "`eslam run" in err
+    assert main(["resume", str(tmp_path / "nowhere")]) == EXIT_USER_ERROR
+    assert "run folder not found" in capsys.readouterr().err

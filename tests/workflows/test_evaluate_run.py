@@ -86,4 +86,4 @@ def test_reevaluation_drops_stale_metrics_and_nice_culls_less(run) -> None:
 def test_eval_of_a_folder_that_is_not_a_run(tmp_path: Path, capsys) -> None:
     assert main(["eval", str(tmp_path)]) == EXIT_USER_ERROR
     err = capsys.readouterr().err.strip()
-    assert "config.yaml: not found: not a finished run folder" in err and "\n" not in err
+    assert "config.yaml: not found: not a run folder" in err and "\n" not in err
