@@ -55,6 +55,16 @@ def _positive_int(text: str) -> int:
     return value
 
 
+def _non_negative_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got '{text}'") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got '{text}'")
+    return value
+
+
 SETTINGS_WIDTH = 100
 """Line width of the settings list under ``eslam run --help``."""
 
@@ -499,15 +509,18 @@ def build_parser() -> argparse.ArgumentParser:
         "--protocol", choices=("eslam", "nice"), default="eslam", help="culling (default eslam)"
     )
     evaluation.add_argument(
-        "--samples", type=int, default=450_000, help="samples per mesh (default 450000)"
+        "--samples", type=_positive_int, default=450_000, help="samples per mesh (default 450000)"
     )
     evaluation.add_argument("--exact", action="store_true", help="point-to-surface distances")
     evaluation.add_argument(
-        "--views", type=int, default=1000, help="depth-L1 virtual views; 0 = skip (1000)"
+        "--views",
+        type=_non_negative_int,
+        default=1000,
+        help="depth-L1 virtual views; 0 = skip (1000)",
     )
     evaluation.add_argument("--seed", type=int, default=0, help="samples and views (0)")
     evaluation.add_argument(
-        "--cull-every", type=int, default=1, help="cull with every k-th frame (1)"
+        "--cull-every", type=_positive_int, default=1, help="cull with every k-th frame (1)"
     )
     evaluation.add_argument(
         "--max-unobserved",

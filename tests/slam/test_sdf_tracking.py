@@ -182,8 +182,12 @@ def test_degenerate_directions_of_a_wall_are_found_and_held() -> None:
     for sliding in ([0, 1.0, 0, 0, 0, 0], [0, 0, 1.0, 0, 0, 0]):
         assert float((projector @ torch.tensor(sliding, dtype=torch.float64)).norm()) < 1e-6
     # a turn about the normal through the points' centroid: omega = e_x, v = -omega x c
-    spin = torch.cat((-torch.linalg.cross(torch.tensor([1.0, 0, 0]).double(), system.centre),
-                      torch.tensor([1.0, 0, 0]).double()))
+    spin = torch.cat(
+        (
+            -torch.linalg.cross(torch.tensor([1.0, 0, 0]).double(), system.centre),
+            torch.tensor([1.0, 0, 0]).double(),
+        )
+    )
     assert float((projector @ spin).norm()) < 1e-6
     off, none = constrained_directions(system, 0.0)
     assert none == 0 and torch.equal(off, torch.eye(6, dtype=torch.float64))
