@@ -84,10 +84,29 @@ def require_file(path: Path, what: str) -> Path:
     return path
 
 
+WIDE_GREY_MODES = ("I;16", "I;16L", "I;16B", "I")
+"""Pillow's modes of one-channel images wider than 8 bits (16-bit grey PNGs): Pillow's own
+``convert("RGB")`` clips them at 255, which turned a 16-bit grey image all white."""
+
+
 def read_rgb(path: Path) -> np.ndarray:
-    """Read a colour image as (H, W, 3) uint8; grey and RGBA images are converted."""
+    """Read a colour image as (H, W, 3) uint8.
+
+    Grey images are replicated to three channels, RGBA and palette images converted,
+    16-bit grey images scaled to 8 bits (value * 255 / 65535, rounded); 16-bit RGB PNGs
+    Pillow already reads as 8-bit RGB. A floating-point or 32-bit image has no agreed
+    colour range: it is refused rather than guessed.
+    """
     try:
         with Image.open(path) as image:
+            if image.mode in WIDE_GREY_MODES:
+                return _grey16_to_rgb(path, np.asarray(image))
+            if image.mode not in ("1", "L", "LA", "P", "PA", "RGB", "RGBA", "RGBX", "CMYK"):
+                raise InputError(
+                    path,
+                    f"colour image has pixel mode {image.mode}, which holds no 8- or 16-bit colour",
+                    "save colour as an 8-bit RGB (or grey) PNG or JPEG",
+                )
             return np.asarray(image.convert("RGB"), dtype=np.uint8).copy()
     except FileNotFoundError:
         raise InputError(path, "colour image not found") from None
@@ -95,6 +114,19 @@ def read_rgb(path: Path) -> np.ndarray:
         raise InputError(
             path, f"unreadable colour image ({error})", "re-export the image"
         ) from None
+
+
+def _grey16_to_rgb(path: Path, grey: np.ndarray) -> np.ndarray:
+    """(H, W) 16-bit grey -> (H, W, 3) uint8, 65535 -> 255 (refused beyond 16 bits)."""
+    wide = grey.astype(np.int64)
+    if wide.size and (wide.min() < 0 or wide.max() > 65535):
+        raise InputError(
+            path,
+            f"colour image holds values {wide.min()}..{wide.max()}, outside 16 bits",
+            "save colour as an 8-bit RGB PNG or JPEG",
+        )
+    eight = ((wide * 255 + 32767) // 65535).astype(np.uint8)
+    return np.repeat(eight[:, :, None], 3, axis=2)
 
 
 def read_depth(path: Path, depth_scale: float) -> np.ndarray:
