@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import NoReturn
 
 from eslam import __version__
-from eslam.errors import ESLAMError
+from eslam.errors import ESLAMError, output_error
 
 # Idle OpenMP threads sleep instead of spinning (set before anything imports torch): with
 # other load on the machine, spinning threads slowed small CPU ops down ~20x here.
@@ -553,6 +553,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         return int(args.handler(args))
     except ESLAMError as error:
         print(f"eslam {args.command}: error: {error}", file=sys.stderr)
+        return EXIT_USER_ERROR
+    except OSError as error:
+        # A write outside eslam.atomic (a folder created, log.txt opened): the same one
+        # line as an atomic write's OutputError when the user can fix it, else a bug.
+        mapped = output_error(error, error.filename) if error.filename else None
+        if mapped is None:
+            raise
+        print(f"eslam {args.command}: error: {mapped}", file=sys.stderr)
         return EXIT_USER_ERROR
     except KeyboardInterrupt as interrupt:
         detail = f": {interrupt}" if str(interrupt) else ""
