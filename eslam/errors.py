@@ -107,7 +107,7 @@ def output_error(error: BaseException, path: str | Path) -> OutputError | None:
         return OutputError(
             path,
             f"no space left on the device{_free_space(path)}",
-            f"free some space or write to another disk, then run again; {_KEEP}",
+            f"free some space or write to another disk; {_KEEP}",
         )
     if isinstance(error, OSError) and error.errno in READ_ONLY_ERRNOS:
         return OutputError(
@@ -128,7 +128,7 @@ def output_error(error: BaseException, path: str | Path) -> OutputError | None:
             path,
             f"writing failed, most likely the disk is full{_free_space(path)} "
             f"(torch: {detail.strip(' .')})",
-            f"free some space or write to another disk, then run again; {_KEEP}",
+            f"free some space or write to another disk; {_KEEP}",
         )
     return None
 

@@ -455,7 +455,7 @@ def run_slam(
 
 def _stopped(error: BaseException, frames: int, run_dir: Path) -> BaseException:
     """What to raise for ``error`` after ``frames`` frames were saved in ``run_dir``."""
-    if frames == 0:
+    if frames == 0 or isinstance(error, RunStopped):  # a RunStopped counts its own frames
         return error
     if isinstance(error, KeyboardInterrupt):
         return RunInterrupted(frames, run_dir)

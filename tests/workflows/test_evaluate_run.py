@@ -111,3 +111,26 @@ def test_evaluation_options_refuse_counts_from_python() -> None:
             EvaluationOptions(**bad)
     with pytest.raises(ConfigError, match="--max-unobserved"):
         EvaluationOptions(max_unobserved_fraction=1.5)
+
+
+def test_eval_into_a_read_only_run_folder_is_one_line(run, monkeypatch, capsys) -> None:
+    """Issue 15: eval outputs that cannot be written were a traceback."""
+    import errno
+    import os
+
+    from eslam import atomic
+
+    run_dir, _ = run
+    before = {p.name: p.read_bytes() for p in run_dir.iterdir() if p.is_file()}
+
+    def read_only(*args, **kwargs):
+        raise OSError(errno.EROFS, os.strerror(errno.EROFS))
+
+    monkeypatch.setattr(atomic.os, "replace", read_only)
+    assert _eval(run_dir) == EXIT_USER_ERROR
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "the file system is read-only" in err
+    assert str(run_dir) in err
+    monkeypatch.undo()
+    after = {p.name: p.read_bytes() for p in run_dir.iterdir() if p.is_file()}
+    assert after == before  # nothing half-written, no temporaries left
