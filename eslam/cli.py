@@ -122,8 +122,13 @@ def _command_inspect(args: argparse.Namespace) -> int:
     from eslam.data import open_sequence
     from eslam.data.inspect import inspect_sequence
 
-    sequence = open_sequence(DataConfig(format=args.format, path=args.path))
-    print(inspect_sequence(sequence).to_text())
+    sequence = open_sequence(
+        DataConfig(format=args.format, path=args.path, depth_scale=args.depth_scale)
+    )
+    summary = inspect_sequence(sequence)
+    print(summary.to_text())
+    if summary.depth_problem is not None:
+        raise summary.depth_problem  # the one line a run would stop with, exit status 2
     return 0
 
 
@@ -425,6 +430,12 @@ def build_parser() -> argparse.ArgumentParser:
     inspect.add_argument("path", metavar="PATH", help="sequence folder")
     inspect.add_argument(
         "--format", choices=sorted(DATASETS), default="replica", help="dataset layout"
+    )
+    inspect.add_argument(
+        "--depth-scale",
+        type=_positive_float,
+        metavar="UNITS",
+        help="depth units per metre (sets data.depth_scale; default: the layout's own)",
     )
     inspect.set_defaults(handler=_command_inspect)
 

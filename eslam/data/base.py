@@ -17,16 +17,14 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 from PIL import Image, UnidentifiedImageError
 
+from eslam.data.depth_units import (
+    COMMON_DEPTH_SCALES,
+    DEPTH_MEDIAN_RANGE_M,
+    check_depth_units,
+)
 from eslam.data.transform import ImageTransform
 from eslam.errors import InputError
 from eslam.types import Frame, Intrinsics
-
-DEPTH_MEDIAN_RANGE_M = (0.1, 20.0)
-"""A frame's median valid depth must lie in this range (metres) after scaling, or the
-depth scale is wrong: no indoor RGB-D sensor we read sees a median closer or farther."""
-
-COMMON_DEPTH_SCALES = (1.0, 1000.0, 5000.0, 6553.5)
-"""Depth PNG units per metre of the usual layouts (metres, ScanNet/7-Scenes mm, TUM, Replica)."""
 
 
 @runtime_checkable
@@ -163,38 +161,6 @@ def check_image_size(path: Path, shape: tuple[int, ...], intrinsics: Intrinsics)
         )
 
 
-def check_depth_units(depth: np.ndarray, path: Path, depth_scale: float) -> None:
-    """Raise if the valid depth of a frame cannot be in metres (the scale is wrong).
-
-    A frame with no valid depth passes (it is skipped by the run loop, with a warning).
-
-    Args:
-        depth: (H, W) depth in metres as read with ``depth_scale`` (0 = invalid).
-        path: the depth image, named in the error.
-        depth_scale: the units per metre used to read it.
-    """
-    valid = depth[depth > 0]
-    if valid.size == 0:
-        return
-    median = float(np.median(valid))
-    low, high = DEPTH_MEDIAN_RANGE_M
-    if low <= median <= high:
-        return
-    raw_median = median * depth_scale
-    fitting = [s for s in COMMON_DEPTH_SCALES if low <= raw_median / s <= high]
-    if fitting:
-        best = min(fitting, key=lambda s: abs(np.log(raw_median / s / 2.0)))
-        suggestion = f"depth scale {best:g} would give {raw_median / best:.2f} m"
-    else:
-        suggestion = f"a depth scale near {raw_median / 2.0:.4g} would give about 2 m"
-    raise InputError(
-        path,
-        f"median depth is {median:.4g} m with depth scale {depth_scale:g} units per metre, "
-        f"outside {low:g}-{high:g} m: the depth scale is wrong",
-        f"{suggestion}; set data.depth_scale",
-    )
-
-
 ImagePreparation = Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]
 """(rgb, depth metres) -> (rgb, depth metres) at the raw camera, e.g. TUM's undistortion."""
 
@@ -305,6 +271,10 @@ class FileSequence:
         pose = None if self._poses is None else self._poses[index]
         return self.reading.read(index, files, pose, self._times[index])
 
+    def depth_path(self, index: int) -> Path:
+        """The depth image of frame ``index`` (named in depth-unit errors)."""
+        return self._depth_paths[index]
+
     def gt_poses(self) -> np.ndarray | None:
         """(N, 4, 4) float64 camera-to-world poses (NaN where a frame has none), or None."""
         return None if self._poses is None else self._poses.copy()
@@ -312,3 +282,19 @@ class FileSequence:
     def timestamps(self) -> np.ndarray:
         """(N,) float64 seconds, or the frame numbers where the dataset has no time stamps."""
         return self._times.copy()
+
+
+__all__ = [
+    "COMMON_DEPTH_SCALES",
+    "DEPTH_MEDIAN_RANGE_M",
+    "FileSequence",
+    "FrameReading",
+    "RGBDSequence",
+    "check_depth_units",
+    "check_image_size",
+    "iterate_frames",
+    "read_depth",
+    "read_rgb",
+    "require_dir",
+    "require_file",
+]
