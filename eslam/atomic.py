@@ -3,6 +3,10 @@
 Everything eslam writes goes through here: the content is written to a temporary
 file in the destination folder and moved into place with ``os.replace``, which is
 atomic on POSIX and Windows. A crash mid-write leaves the old file (or none).
+
+A write that fails for a reason the user can fix (disk full, read-only file system,
+no permission, a path under /proc or /sys) raises :class:`~eslam.errors.OutputError`:
+one line naming the file and the fix, which the CLI prints with exit status 2.
 """
 
 from __future__ import annotations
@@ -13,6 +17,8 @@ import shutil
 import tempfile
 from collections.abc import Callable, Iterator
 from pathlib import Path
+
+from eslam.errors import output_error, refuse_virtual_location
 
 
 def _umask() -> int:
@@ -30,18 +36,36 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     from the extension (Pillow, trimesh) work unchanged.
     """
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp_name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=path.suffix, dir=path.parent)
-    os.close(fd)
+    refuse_virtual_location(path)
+    with _as_output_error(path):
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp_name = tempfile.mkstemp(
+            prefix=f".{path.name}.", suffix=path.suffix, dir=path.parent
+        )
+        os.close(fd)
     tmp = Path(tmp_name)
-    # mkstemp makes the file private (0600); give it the permissions a plain open() would.
-    os.chmod(tmp, 0o666 & ~_umask())
     try:
-        yield tmp
-        os.replace(tmp, path)
+        with _as_output_error(path):
+            # mkstemp makes the file private (0600); give it the permissions open() would.
+            os.chmod(tmp, 0o666 & ~_umask())
+            yield tmp
+            os.replace(tmp, path)
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
+
+
+@contextlib.contextmanager
+def _as_output_error(path: Path) -> Iterator[None]:
+    """Turn a write failure the user can fix into OutputError naming ``path``; let any
+    other error (a bug, the writer's own checks) through unchanged."""
+    try:
+        yield
+    except (OSError, RuntimeError) as error:
+        mapped = output_error(error, path)
+        if mapped is None:
+            raise
+        raise mapped from error
 
 
 def write_text(path: str | Path, text: str) -> None:
@@ -75,22 +99,26 @@ def atomic_directory(path: str | Path, overwrite: bool = False) -> Iterator[Path
         The temporary folder to write into (beside ``path``, same file system).
     """
     path = Path(path)
+    refuse_virtual_location(path)
     if path.exists() and not path.is_dir():
         raise FileExistsError(f"{path} exists and is not a folder")
     if path.is_dir() and any(path.iterdir()) and not overwrite:
         raise FileExistsError(f"{path} already exists and is not empty")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    staging = Path(tempfile.mkdtemp(prefix=f".{path.name}.partial-", dir=path.parent))
-    os.chmod(staging, 0o777 & ~_umask())
+    with _as_output_error(path):
+        path.parent.mkdir(parents=True, exist_ok=True)
+        staging = Path(tempfile.mkdtemp(prefix=f".{path.name}.partial-", dir=path.parent))
     try:
-        yield staging
+        with _as_output_error(path):
+            os.chmod(staging, 0o777 & ~_umask())
+            yield staging
     except BaseException:
         shutil.rmtree(staging, ignore_errors=True)
         raise
-    old = None
-    if path.exists():
-        old = Path(tempfile.mkdtemp(prefix=f".{path.name}.old-", dir=path.parent))
-        os.replace(path, old / path.name)
-    os.replace(staging, path)
+    with _as_output_error(path):
+        old = None
+        if path.exists():
+            old = Path(tempfile.mkdtemp(prefix=f".{path.name}.old-", dir=path.parent))
+            os.replace(path, old / path.name)
+        os.replace(staging, path)
     if old is not None:
         shutil.rmtree(old, ignore_errors=True)

@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import NoReturn
 
 from eslam import __version__
-from eslam.errors import ESLAMError
+from eslam.errors import ESLAMError, output_error
 
 # Idle OpenMP threads sleep instead of spinning (set before anything imports torch): with
 # other load on the machine, spinning threads slowed small CPU ops down ~20x here.
@@ -55,6 +55,16 @@ def _positive_int(text: str) -> int:
         raise argparse.ArgumentTypeError(f"expected a positive integer, got '{text}'") from None
     if value <= 0:
         raise argparse.ArgumentTypeError(f"expected a positive integer, got '{text}'")
+    return value
+
+
+def _non_negative_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got '{text}'") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got '{text}'")
     return value
 
 
@@ -115,8 +125,13 @@ def _command_inspect(args: argparse.Namespace) -> int:
     from eslam.data import open_sequence
     from eslam.data.inspect import inspect_sequence
 
-    sequence = open_sequence(DataConfig(format=args.format, path=args.path))
-    print(inspect_sequence(sequence).to_text())
+    sequence = open_sequence(
+        DataConfig(format=args.format, path=args.path, depth_scale=args.depth_scale)
+    )
+    summary = inspect_sequence(sequence)
+    print(summary.to_text())
+    if summary.depth_problem is not None:
+        raise summary.depth_problem  # the one line a run would stop with, exit status 2
     return 0
 
 
@@ -431,6 +446,12 @@ def build_parser() -> argparse.ArgumentParser:
     inspect.add_argument(
         "--format", choices=sorted(DATASETS), default="replica", help="dataset layout"
     )
+    inspect.add_argument(
+        "--depth-scale",
+        type=_positive_float,
+        metavar="UNITS",
+        help="depth units per metre (sets data.depth_scale; default: the layout's own)",
+    )
     inspect.set_defaults(handler=_command_inspect)
 
     run = commands.add_parser(
@@ -525,15 +546,18 @@ def build_parser() -> argparse.ArgumentParser:
         "--protocol", choices=("eslam", "nice"), default="eslam", help="culling (default eslam)"
     )
     evaluation.add_argument(
-        "--samples", type=int, default=450_000, help="samples per mesh (default 450000)"
+        "--samples", type=_positive_int, default=450_000, help="samples per mesh (default 450000)"
     )
     evaluation.add_argument("--exact", action="store_true", help="point-to-surface distances")
     evaluation.add_argument(
-        "--views", type=int, default=1000, help="depth-L1 virtual views; 0 = skip (1000)"
+        "--views",
+        type=_non_negative_int,
+        default=1000,
+        help="depth-L1 virtual views; 0 = skip (1000)",
     )
     evaluation.add_argument("--seed", type=int, default=0, help="samples and views (0)")
     evaluation.add_argument(
-        "--cull-every", type=int, default=1, help="cull with every k-th frame (1)"
+        "--cull-every", type=_positive_int, default=1, help="cull with every k-th frame (1)"
     )
     evaluation.add_argument(
         "--max-unobserved",
@@ -566,6 +590,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         return int(args.handler(args))
     except ESLAMError as error:
         print(f"eslam {args.command}: error: {error}", file=sys.stderr)
+        return EXIT_USER_ERROR
+    except OSError as error:
+        # A write outside eslam.atomic (a folder created, log.txt opened): the same one
+        # line as an atomic write's OutputError when the user can fix it, else a bug.
+        mapped = output_error(error, error.filename) if error.filename else None
+        if mapped is None:
+            raise
+        print(f"eslam {args.command}: error: {mapped}", file=sys.stderr)
         return EXIT_USER_ERROR
     except KeyboardInterrupt as interrupt:
         detail = str(interrupt) or "interrupted"

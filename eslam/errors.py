@@ -6,6 +6,8 @@ status 2, so every message must be complete without a traceback.
 
 from __future__ import annotations
 
+import errno
+import shutil
 from pathlib import Path
 
 
@@ -30,6 +32,117 @@ class InputError(ESLAMError):
         if fix:
             message += f" ({fix})"
         super().__init__(message)
+
+
+class OutputError(ESLAMError):
+    """eslam could not write one of its outputs (disk full, read-only, no permission).
+
+    Raised by the atomic writers (:mod:`eslam.atomic`), which leave the earlier version
+    of the file in place, so the message can promise that nothing was corrupted.
+
+    Args:
+        path: the file or folder eslam was writing.
+        problem: what went wrong, as a sentence fragment.
+        fix: what the user can do about it.
+    """
+
+    def __init__(self, path: str | Path, problem: str, fix: str) -> None:
+        self.path = Path(path)
+        self.problem = problem
+        self.fix = fix
+        super().__init__(f"{self.path}: {problem} ({fix})")
+
+
+VIRTUAL_FILE_SYSTEMS = (Path("/proc"), Path("/sys"))
+"""Kernel file systems: nothing eslam writes belongs there (writes fail oddly or worse)."""
+
+DISK_FULL_ERRNOS = frozenset({errno.ENOSPC, getattr(errno, "EDQUOT", errno.ENOSPC)})
+READ_ONLY_ERRNOS = frozenset({errno.EROFS})
+PERMISSION_ERRNOS = frozenset({errno.EACCES, errno.EPERM})
+
+TORCH_WRITE_FAILURES = ("unexpected pos", "PytorchStreamWriter failed", "file write failed")
+"""Phrases of torch.save's RuntimeError when the file cannot be written: its zip writer
+loses the OS error (on a full disk it reports "unexpected pos N vs M")."""
+
+_KEEP = "the earlier version of the file, if any, is unchanged"
+
+
+def virtual_location(path: str | Path) -> Path | None:
+    """The kernel file system (/proc, /sys) ``path`` lies in, or None."""
+    absolute = Path(path).absolute()
+    for root in VIRTUAL_FILE_SYSTEMS:
+        if absolute == root or root in absolute.parents:
+            return root
+    return None
+
+
+def refuse_virtual_location(path: str | Path) -> None:
+    """Raise OutputError if ``path`` lies under /proc or /sys (before anything is written)."""
+    root = virtual_location(path)
+    if root is not None:
+        raise OutputError(
+            path,
+            f"is under {root}, a kernel file system, not a place for output",
+            "choose an output folder on a disk",
+        )
+
+
+def output_error(error: BaseException, path: str | Path) -> OutputError | None:
+    """The one-line OutputError for a failed write of ``path``, or None if ``error`` is
+    not a write failure a user can fix (a bug, which should keep its traceback).
+
+    Args:
+        error: what the write raised: an OSError (ENOSPC, EDQUOT, EROFS, EACCES, EPERM,
+            or any OSError under /proc or /sys) or torch.save's RuntimeError on a full disk.
+        path: the file or folder being written (named in the message).
+    """
+    root = virtual_location(path)
+    if root is not None and isinstance(error, OSError):
+        return OutputError(
+            path,
+            f"is under {root}, a kernel file system, not a place for output",
+            "choose an output folder on a disk",
+        )
+    if isinstance(error, OSError) and error.errno in DISK_FULL_ERRNOS:
+        return OutputError(
+            path,
+            f"no space left on the device{_free_space(path)}",
+            f"free some space or write to another disk; {_KEEP}",
+        )
+    if isinstance(error, OSError) and error.errno in READ_ONLY_ERRNOS:
+        return OutputError(
+            path,
+            "the file system is read-only",
+            f"write to a folder on a writable disk (--out), or remount it; {_KEEP}",
+        )
+    if isinstance(error, OSError) and error.errno in PERMISSION_ERRNOS:
+        return OutputError(
+            path,
+            "permission denied",
+            f"make {Path(path).parent} writable (chmod u+w) or write somewhere else; {_KEEP}",
+        )
+    text = str(error)
+    if isinstance(error, RuntimeError) and any(p in text for p in TORCH_WRITE_FAILURES):
+        detail = text.strip().splitlines()[0] if text.strip() else ""
+        return OutputError(
+            path,
+            f"writing failed, most likely the disk is full{_free_space(path)} "
+            f"(torch: {detail.strip(' .')})",
+            f"free some space or write to another disk; {_KEEP}",
+        )
+    return None
+
+
+def _free_space(path: str | Path) -> str:
+    """ ", N MB free" on the disk of ``path`` (its nearest existing folder), or ""."""
+    folder = Path(path).absolute()
+    while not folder.exists() and folder != folder.parent:
+        folder = folder.parent
+    try:
+        free = shutil.disk_usage(folder).free
+    except OSError:
+        return ""
+    return f", {free / 1e6:.0f} MB free"
 
 
 class ConfigError(ESLAMError):
@@ -66,6 +179,10 @@ def _saved(frames: int, run_dir: Path) -> str:
 
 
 def _describe(error: BaseException) -> str:
+    filename = getattr(error, "filename", None)
+    mapped = output_error(error, filename) if filename else None
+    if mapped is not None:
+        return str(mapped)
     text = str(error).strip().splitlines()[0] if str(error).strip() else ""
     return f"{type(error).__name__}: {text}" if text else type(error).__name__
 

@@ -229,6 +229,30 @@ def test_post_init_checks_name_the_file_and_key(tmp_path: Path) -> None:
         SceneConfig(bound=[[0.0, 1.0]])
 
 
+@pytest.mark.parametrize(
+    ("override", "least"),
+    [
+        ("tracking.render.iterations=-1", 1),
+        ("tracking.render.iterations=0", 1),
+        ("tracking.render.rays=0", 1),
+        ("tracking.sdf.iterations=0", 1),
+        ("tracking.hybrid.render_iterations=0", 1),
+        ("mapping.rays=0", 1),
+        ("mapping.iterations=-1", 0),
+        ("mapping.first_iterations=-1", 0),
+        ("mapping.first_rays=0", 1),
+        ("render.samples_stratified=0", 1),
+        ("render.samples_surface=-1", 0),
+    ],
+)
+def test_counts_are_checked_at_load_naming_the_key(override: str, least: int) -> None:
+    """Issue 15: tracking.iterations=-1 and tracking.rays=0 were accepted; a combined check
+    ("iterations and rays must be >= 1") blamed the file that set the other key."""
+    key = override.split("=")[0]
+    message = error_of(CONFIGS / "base.yaml", (override,))
+    assert message.startswith(f"command line: {key} must be >= {least}"), message
+
+
 def test_config_error_is_a_user_error() -> None:
     assert issubclass(ConfigError, ESLAMError)
 

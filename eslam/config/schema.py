@@ -12,6 +12,16 @@ from dataclasses import dataclass, field
 from typing import Literal
 
 
+def _at_least(section: object, name: str, least: int) -> None:
+    """Raise ValueError naming ``name`` unless the count ``section.name`` is >= ``least``.
+
+    One check per field, so the loader names the exact key (and the file that set it).
+    """
+    value = getattr(section, name)
+    if value < least:
+        raise ValueError(f"{name} must be >= {least}, got {value}")
+
+
 @dataclass
 class DataConfig:
     """Which sequence to read and how it is laid out on disk."""
@@ -154,10 +164,9 @@ class RenderConfig:
     """Render colour; off is ablation f (depth only, no colour loss)."""
 
     def __post_init__(self) -> None:
-        if self.samples_stratified < 1 or self.samples_surface < 0 or self.samples_no_depth < 2:
-            raise ValueError(
-                "samples_stratified must be >= 1, samples_surface >= 0, samples_no_depth >= 2"
-            )
+        _at_least(self, "samples_stratified", 1)
+        _at_least(self, "samples_surface", 0)
+        _at_least(self, "samples_no_depth", 2)
         if self.surface_band <= 0 or self.far_factor <= 1.0:
             raise ValueError("surface_band must be > 0 and far_factor > 1")
 
@@ -211,10 +220,8 @@ class RenderTrackerConfig:
     """Loss weights while tracking (paper: 10, 200, 50, 1, 5)."""
 
     def __post_init__(self) -> None:
-        if self.iterations < 1 or self.rays < 1:
-            raise ValueError(
-                f"iterations and rays must be >= 1, got {self.iterations} and {self.rays}"
-            )
+        _at_least(self, "iterations", 1)
+        _at_least(self, "rays", 1)
 
 
 @dataclass
@@ -253,8 +260,9 @@ class SdfTrackerConfig:
     def __post_init__(self) -> None:
         if not self.levels or min(self.levels) < 6 or list(self.levels) != sorted(self.levels):
             raise ValueError(f"levels must be increasing point counts >= 6, got {self.levels}")
-        if self.iterations < 1 or self.robust_scale <= 0 or not 0 < self.max_sdf <= 1:
-            raise ValueError("iterations must be >= 1, robust_scale > 0, max_sdf in (0, 1]")
+        _at_least(self, "iterations", 1)
+        if self.robust_scale <= 0 or not 0 < self.max_sdf <= 1:
+            raise ValueError("robust_scale must be > 0 and max_sdf in (0, 1]")
         if self.degeneracy < 0:
             raise ValueError(f"degeneracy must be >= 0, got {self.degeneracy}")
         if not 0 <= self.min_inlier_fraction < 1 or self.max_residual <= 0:
@@ -355,8 +363,11 @@ class MappingConfig:
     """Loss weights while mapping (paper: 5, 200, 10, 0.1, 5)."""
 
     def __post_init__(self) -> None:
-        if self.every < 1 or self.window < 3 or self.rays < 1 or self.iterations < 0:
-            raise ValueError("every must be >= 1, window >= 3, rays >= 1, iterations >= 0")
+        _at_least(self, "every", 1)
+        _at_least(self, "window", 3)
+        _at_least(self, "rays", 1)
+        _at_least(self, "iterations", 0)
+        _at_least(self, "first_iterations", 0)
         if self.first_rays is not None and self.first_rays < 1:
             raise ValueError(f"first_rays must be >= 1 or null, got {self.first_rays}")
         if not 0.0 < self.first_lr_decay <= 1.0:

@@ -17,16 +17,14 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 from PIL import Image, UnidentifiedImageError
 
+from eslam.data.depth_units import (
+    COMMON_DEPTH_SCALES,
+    DEPTH_MEDIAN_RANGE_M,
+    check_depth_units,
+)
 from eslam.data.transform import ImageTransform
 from eslam.errors import InputError
 from eslam.types import Frame, Intrinsics
-
-DEPTH_MEDIAN_RANGE_M = (0.1, 20.0)
-"""A frame's median valid depth must lie in this range (metres) after scaling, or the
-depth scale is wrong: no indoor RGB-D sensor we read sees a median closer or farther."""
-
-COMMON_DEPTH_SCALES = (1.0, 1000.0, 5000.0, 6553.5)
-"""Depth PNG units per metre of the usual layouts (metres, ScanNet/7-Scenes mm, TUM, Replica)."""
 
 
 @runtime_checkable
@@ -84,10 +82,29 @@ def require_file(path: Path, what: str) -> Path:
     return path
 
 
+WIDE_GREY_MODES = ("I;16", "I;16L", "I;16B", "I")
+"""Pillow's modes of one-channel images wider than 8 bits (16-bit grey PNGs): Pillow's own
+``convert("RGB")`` clips them at 255, which turned a 16-bit grey image all white."""
+
+
 def read_rgb(path: Path) -> np.ndarray:
-    """Read a colour image as (H, W, 3) uint8; grey and RGBA images are converted."""
+    """Read a colour image as (H, W, 3) uint8.
+
+    Grey images are replicated to three channels, RGBA and palette images converted,
+    16-bit grey images scaled to 8 bits (value * 255 / 65535, rounded); 16-bit RGB PNGs
+    Pillow already reads as 8-bit RGB. A floating-point or 32-bit image has no agreed
+    colour range: it is refused rather than guessed.
+    """
     try:
         with Image.open(path) as image:
+            if image.mode in WIDE_GREY_MODES:
+                return _grey16_to_rgb(path, np.asarray(image))
+            if image.mode not in ("1", "L", "LA", "P", "PA", "RGB", "RGBA", "RGBX", "CMYK"):
+                raise InputError(
+                    path,
+                    f"colour image has pixel mode {image.mode}, which holds no 8- or 16-bit colour",
+                    "save colour as an 8-bit RGB (or grey) PNG or JPEG",
+                )
             return np.asarray(image.convert("RGB"), dtype=np.uint8).copy()
     except FileNotFoundError:
         raise InputError(path, "colour image not found") from None
@@ -95,6 +112,19 @@ def read_rgb(path: Path) -> np.ndarray:
         raise InputError(
             path, f"unreadable colour image ({error})", "re-export the image"
         ) from None
+
+
+def _grey16_to_rgb(path: Path, grey: np.ndarray) -> np.ndarray:
+    """(H, W) 16-bit grey -> (H, W, 3) uint8, 65535 -> 255 (refused beyond 16 bits)."""
+    wide = grey.astype(np.int64)
+    if wide.size and (wide.min() < 0 or wide.max() > 65535):
+        raise InputError(
+            path,
+            f"colour image holds values {wide.min()}..{wide.max()}, outside 16 bits",
+            "save colour as an 8-bit RGB PNG or JPEG",
+        )
+    eight = ((wide * 255 + 32767) // 65535).astype(np.uint8)
+    return np.repeat(eight[:, :, None], 3, axis=2)
 
 
 def read_depth(path: Path, depth_scale: float) -> np.ndarray:
@@ -129,38 +159,6 @@ def check_image_size(path: Path, shape: tuple[int, ...], intrinsics: Intrinsics)
             f"{intrinsics.width}x{intrinsics.height}",
             "fix the camera parameters or the image size",
         )
-
-
-def check_depth_units(depth: np.ndarray, path: Path, depth_scale: float) -> None:
-    """Raise if the valid depth of a frame cannot be in metres (the scale is wrong).
-
-    A frame with no valid depth passes (it is skipped by the run loop, with a warning).
-
-    Args:
-        depth: (H, W) depth in metres as read with ``depth_scale`` (0 = invalid).
-        path: the depth image, named in the error.
-        depth_scale: the units per metre used to read it.
-    """
-    valid = depth[depth > 0]
-    if valid.size == 0:
-        return
-    median = float(np.median(valid))
-    low, high = DEPTH_MEDIAN_RANGE_M
-    if low <= median <= high:
-        return
-    raw_median = median * depth_scale
-    fitting = [s for s in COMMON_DEPTH_SCALES if low <= raw_median / s <= high]
-    if fitting:
-        best = min(fitting, key=lambda s: abs(np.log(raw_median / s / 2.0)))
-        suggestion = f"depth scale {best:g} would give {raw_median / best:.2f} m"
-    else:
-        suggestion = f"a depth scale near {raw_median / 2.0:.4g} would give about 2 m"
-    raise InputError(
-        path,
-        f"median depth is {median:.4g} m with depth scale {depth_scale:g} units per metre, "
-        f"outside {low:g}-{high:g} m: the depth scale is wrong",
-        f"{suggestion}; set data.depth_scale",
-    )
 
 
 ImagePreparation = Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]
@@ -273,6 +271,10 @@ class FileSequence:
         pose = None if self._poses is None else self._poses[index]
         return self.reading.read(index, files, pose, self._times[index])
 
+    def depth_path(self, index: int) -> Path:
+        """The depth image of frame ``index`` (named in depth-unit errors)."""
+        return self._depth_paths[index]
+
     def gt_poses(self) -> np.ndarray | None:
         """(N, 4, 4) float64 camera-to-world poses (NaN where a frame has none), or None."""
         return None if self._poses is None else self._poses.copy()
@@ -284,3 +286,18 @@ class FileSequence:
     def frame_files(self, index: int) -> tuple[Path, Path]:
         """The (colour, depth) files of frame ``index``, e.g. to fingerprint the input."""
         return self._colour_paths[index], self._depth_paths[index]
+
+__all__ = [
+    "COMMON_DEPTH_SCALES",
+    "DEPTH_MEDIAN_RANGE_M",
+    "FileSequence",
+    "FrameReading",
+    "RGBDSequence",
+    "check_depth_units",
+    "check_image_size",
+    "iterate_frames",
+    "read_depth",
+    "read_rgb",
+    "require_dir",
+    "require_file",
+]

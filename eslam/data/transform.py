@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 from PIL import Image
 
+from eslam.errors import ConfigError
 from eslam.types import Intrinsics
 
 
@@ -41,9 +42,21 @@ class ImageTransform:
         return self.size is None and self.crop == 0
 
     def intrinsics(self, intrinsics: Intrinsics) -> Intrinsics:
-        """The intrinsics of images this transform produced from images of ``intrinsics``."""
+        """The intrinsics of images this transform produced from images of ``intrinsics``.
+
+        Raises:
+            ConfigError: the crop would leave no image (``data.crop`` names the fix); the
+                readers call this when they open a sequence, before any frame is used.
+        """
         if self.size is not None and self.size != intrinsics.size:
             intrinsics = intrinsics.scaled(*self.size)
+        if 2 * self.crop >= min(intrinsics.size):
+            width, height = intrinsics.size
+            raise ConfigError(
+                f"data.crop={self.crop} removes {self.crop} pixels on every border of a "
+                f"{width}x{height} image (after any resize), leaving nothing: "
+                f"set data.crop below {(min(width, height) + 1) // 2}"
+            )
         if self.crop:
             intrinsics = intrinsics.cropped(self.crop, self.crop, self.crop, self.crop)
         return intrinsics

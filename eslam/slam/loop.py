@@ -31,6 +31,7 @@ import torch
 from eslam.config import ESLAMConfig
 from eslam.config.device import resolve_device
 from eslam.data import RGBDSequence, open_sequence
+from eslam.data.depth_units import DepthCheck, sequence_depth_file, sequence_depth_scale
 from eslam.data.source import FrameSource, SequenceSource, source_length
 from eslam.errors import ConfigError, InputError, RunInterrupted
 from eslam.field.scene_field import SceneField
@@ -130,6 +131,7 @@ class RunLoop:
         self._frames_without_depth = 0
         self._last_failed = False
         self._before_mapping: tuple[dict[str, torch.Tensor], torch.Tensor] | None = None
+        self.depth_check = DepthCheck.for_run(config.data.depth_scale, config.scene.bound)
 
     def run(self, frames: Iterable[Frame], total: int | None, stop_after: int | None) -> RunEnd:
         """Process ``frames`` (``total`` of them in the whole run, None if unknown) until
@@ -260,6 +262,8 @@ class RunLoop:
         field = state.field
         if field is None:
             raise RuntimeError("mapping before the field exists")
+        # a wrong depth unit mid-stream (a live source, a mixed folder) must not be mapped
+        self.depth_check.check(frame.depth, self.source, f"frame {index} (a keyframe)")
         self._before_mapping = (
             {k: v.detach().clone() for k, v in field.state_dict().items()},
             state.trajectory.poses.clone(),
@@ -335,21 +339,24 @@ def non_finite_quality(quality: TrackingQuality | None) -> TrackingQuality:
     return TrackingQuality(iterations, 0.0, float("inf"), failed=True)
 
 
-def preflight(sequence: RGBDSequence) -> None:
+def preflight(sequence: RGBDSequence, depth: DepthCheck | None = None) -> None:
     """Read the first and last frames of ``sequence``: the reader's checks raise on bad input.
 
     Opening a sequence already checked its layout, file pairs and poses; reading two
-    frames checks the images (readable, sizes, depth units) before a run writes anything.
+    frames checks the images (readable, sizes, depth units) before a run writes anything,
+    and ``depth`` (when given) whether their depth is plausibly metres.
     Only recorded input has a last frame to read; a live source is checked as it goes.
 
     Raises:
-        InputError: no frames, or a frame fails its reader's checks.
+        InputError: no frames, or a frame fails its reader's checks or ``depth``.
     """
     if len(sequence) == 0:
         raise InputError(sequence.root, "holds no frames", "check the --data path and its layout")
-    sequence[0]
-    if len(sequence) > 1:
-        sequence[len(sequence) - 1]
+    for index in sorted({0, len(sequence) - 1}):
+        frame = sequence[index]
+        if depth is not None:
+            where = sequence_depth_file(sequence, index) or sequence.root
+            depth.check(frame.depth, where, f"frame {index}")
 
 
 @contextlib.contextmanager
@@ -381,7 +388,7 @@ def _open_input(
     if config.data.path is None:
         raise ConfigError("data.path is not set (pass --data PATH or set data.path in the config)")
     sequence = open_sequence(config.data)
-    preflight(sequence)
+    preflight(sequence, DepthCheck.for_run(sequence_depth_scale(sequence), config.scene.bound))
     return None, sequence
 
 

@@ -4,14 +4,21 @@ Every ``output.checkpoint_every`` frames, on a failure and at the end it writes 
 (everything needed to resume), trajectory.txt / trajectory_gt.txt (the frames so far)
 and timings.json; on a failure and at the end also metrics.json (so ``eslam eval``
 scores an interrupted run's frames too) and, when the stream ended, mesh.ply.
-Every file is written atomically, so a crash leaves the last complete version.
+Every file is written atomically, so a crash leaves the last complete version. A
+checkpoint that cannot be written (disk full, read-only) stops the run with a
+:class:`~eslam.errors.RunStopped` that counts the frames of the last checkpoint that
+was written (the earlier map.pt is intact), so `eslam resume` continues from there.
 """
 
 from __future__ import annotations
 
+import contextlib
+from collections.abc import Iterator
+
 import numpy as np
 
 from eslam.config import ESLAMConfig
+from eslam.errors import OutputError, RunStopped
 from eslam.evaluate.trajectory import absolute_trajectory_error
 from eslam.io.run_dir import RunDirectory, write_json
 from eslam.io.trajectory import write_tum_trajectory
@@ -63,8 +70,8 @@ class RunWriter(RunObserverBase):
 
     Attributes:
         metrics: metrics.json's contents once the run finished (None before).
-        saved_frames: frames in the last checkpoint written (what a resume continues
-            from; the caller sets it to a resumed checkpoint's frames).
+        saved_frames: frames in the last map.pt written (what a resume continues from;
+            a resumed run's to begin with).
     """
 
     def __init__(self, run: RunDirectory, config: ESLAMConfig, memory: PeakMemory) -> None:
@@ -77,14 +84,17 @@ class RunWriter(RunObserverBase):
 
     def on_start(self, start: RunStart) -> None:
         self.state = start.state
+        self.saved_frames = start.state.next_frame
 
     def on_frame(self, frame: FrameDone) -> None:
         if (frame.index + 1) % self.config.output.checkpoint_every == 0:
-            self.checkpoint()
+            with self._stop_on_failed_checkpoint():
+                self.checkpoint()
 
     def on_finish(self, end: RunEnd) -> None:
         state = self._state()
-        self.checkpoint()
+        with self._stop_on_failed_checkpoint():
+            self.checkpoint()
         if end.complete and self.config.output.mesh and state.field is not None:
             from eslam.io.mesh_files import write_mesh_ply
             from eslam.mesh.extract import extract_mesh
@@ -98,12 +108,24 @@ class RunWriter(RunObserverBase):
 
     def on_failure(self, error: BaseException, frames: int) -> None:
         if self.state is not None and frames > 0:
-            self.checkpoint()
+            with self._stop_on_failed_checkpoint():
+                self.checkpoint()
             state = self._state()
             write_json(
                 self.run.metrics,
                 run_metrics(state, str(self.memory.device), self.memory.peak_mb()),
             )
+
+    @contextlib.contextmanager
+    def _stop_on_failed_checkpoint(self) -> Iterator[None]:
+        """A checkpoint that could not be written: the run stops, resumable from the last
+        one that was (its frames named), or with the write's own error if none was."""
+        try:
+            yield
+        except OutputError as error:
+            if self.saved_frames == 0:
+                raise
+            raise RunStopped(error, self.saved_frames, self.run.root) from error
 
     def _state(self) -> SLAMState:
         if self.state is None:

@@ -23,7 +23,7 @@ import numpy as np
 
 from eslam.config import ESLAMConfig, load_config
 from eslam.data import RGBDSequence, open_sequence
-from eslam.errors import InputError
+from eslam.errors import ConfigError, InputError
 from eslam.evaluate.depth_l1 import DepthL1Options, depth_l1
 from eslam.evaluate.reconstruction import (
     RELEASE_SAMPLES,
@@ -72,6 +72,18 @@ class EvaluationOptions:
     max_edge: float | None = None
     device: str = "cpu"
     data: Path | None = None
+
+    def __post_init__(self) -> None:
+        """Refuse counts that would score nothing (or crash deep in the metrics)."""
+        for name, least in (("samples", 1), ("cull_every", 1), ("depth_l1_views", 0)):
+            value = getattr(self, name)
+            if value < least:
+                flag = "--views" if name == "depth_l1_views" else f"--{name.replace('_', '-')}"
+                raise ConfigError(f"{flag} must be >= {least}, got {value}")
+        if not 0.0 <= self.max_unobserved_fraction <= 1.0:
+            raise ConfigError(
+                f"--max-unobserved must be in [0, 1], got {self.max_unobserved_fraction}"
+            )
 
 
 EVALUATION_KEYS = (

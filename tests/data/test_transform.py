@@ -7,6 +7,7 @@ import pytest
 import torch
 
 from eslam.data.transform import ImageTransform
+from eslam.errors import ConfigError
 from eslam.geometry.camera import project_points
 from eslam.types import Intrinsics
 
@@ -61,5 +62,24 @@ def test_identity_changes_nothing() -> None:
 def test_bad_arguments() -> None:
     with pytest.raises(ValueError, match="crop"):
         ImageTransform(crop=-1)
-    with pytest.raises(ValueError, match="crop leaves no image"):
-        ImageTransform(crop=400).intrinsics(CAMERA)
+    with pytest.raises(ConfigError, match=r"data.crop=240 .* 640x480 .* below 240"):
+        ImageTransform(crop=240).intrinsics(CAMERA)
+    assert ImageTransform(crop=239).intrinsics(CAMERA).size == (162, 2)
+    with pytest.raises(ConfigError, match=r"data.crop=100 .* 320x160 .* below 80"):
+        ImageTransform((320, 160), crop=100).intrinsics(CAMERA)
+
+
+def test_crop_larger_than_the_image_is_one_line_exit_2(tmp_path, capsys) -> None:
+    """Issue 15: data.crop larger than the image was a traceback (exit 1)."""
+    from eslam.cli import EXIT_USER_ERROR, main
+    from eslam.synthetic import SynthConfig, write_synthetic_sequence
+    from eslam.workflows.demo import DEMO_CONFIG
+
+    data = tmp_path / "data"
+    write_synthetic_sequence(data, SynthConfig(frames=2, width=32, height=24))
+    out = tmp_path / "run"
+    code = main(["run", str(DEMO_CONFIG), "--data", str(data), "--out", str(out), "data.crop=12"])
+    assert code == EXIT_USER_ERROR
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "data.crop=12" in err and "below 12" in err
+    assert not out.exists()

@@ -87,3 +87,50 @@ def test_eval_of_a_folder_that_is_not_a_run(tmp_path: Path, capsys) -> None:
     assert main(["eval", str(tmp_path)]) == EXIT_USER_ERROR
     err = capsys.readouterr().err.strip()
     assert "config.yaml: not found: not a run folder" in err and "\n" not in err
+
+
+@pytest.mark.parametrize(
+    ("flag", "value"),
+    [("--samples", "0"), ("--samples", "-5"), ("--cull-every", "0"), ("--views", "-1")],
+)
+def test_eval_counts_below_one_are_one_line_exit_2(tmp_path: Path, capsys, flag, value) -> None:
+    """Issue 15: `eslam eval --samples 0` / `--cull-every 0` ended in a traceback."""
+    with pytest.raises(SystemExit) as stopped:  # argparse's error exit, one line
+        main(["eval", str(tmp_path), flag, value])
+    assert stopped.value.code == EXIT_USER_ERROR
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and flag in err and "Traceback" not in err
+
+
+def test_evaluation_options_refuse_counts_from_python() -> None:
+    from eslam.errors import ConfigError
+    from eslam.workflows.evaluate_run import EvaluationOptions
+
+    for bad in ({"samples": 0}, {"cull_every": 0}, {"depth_l1_views": -1}):
+        with pytest.raises(ConfigError, match="must be >="):
+            EvaluationOptions(**bad)
+    with pytest.raises(ConfigError, match="--max-unobserved"):
+        EvaluationOptions(max_unobserved_fraction=1.5)
+
+
+def test_eval_into_a_read_only_run_folder_is_one_line(run, monkeypatch, capsys) -> None:
+    """Issue 15: eval outputs that cannot be written were a traceback."""
+    import errno
+    import os
+
+    from eslam import atomic
+
+    run_dir, _ = run
+    before = {p.name: p.read_bytes() for p in run_dir.iterdir() if p.is_file()}
+
+    def read_only(*args, **kwargs):
+        raise OSError(errno.EROFS, os.strerror(errno.EROFS))
+
+    monkeypatch.setattr(atomic.os, "replace", read_only)
+    assert _eval(run_dir) == EXIT_USER_ERROR
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "the file system is read-only" in err
+    assert str(run_dir) in err
+    monkeypatch.undo()
+    after = {p.name: p.read_bytes() for p in run_dir.iterdir() if p.is_file()}
+    assert after == before  # nothing half-written, no temporaries left
