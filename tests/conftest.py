@@ -30,6 +30,10 @@ def real_data() -> Path:
 
 
 TINY = [
+    # The loop tests keep the paper's tracker: on these coarse planes (0.24 / 0.12 m
+    # cells) the learned TSDF is too rough for the SDF stage of the demo's `hybrid`
+    # (0.76 cm ATE against 0.50 cm); the trackers have their own tests.
+    "tracking.method=render",
     "tracking.render.rays=200",
     "tracking.border=4",
     "tracking.render.iterations=8",
