@@ -558,6 +558,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     if extra:
         overridable = hasattr(args, "overrides")
         bad = [item for item in extra if not overridable or item.startswith("-") or "=" not in item]
+        given = list(sys.argv[1:] if argv is None else argv)
+        options = [item for item in extra if item.startswith("--")]
+        hint = _setting_hint(options, given) if overridable else None
+        if hint is not None:
+            print(
+                f"eslam {args.command}: error: {hint} (see eslam {args.command} --help)",
+                file=sys.stderr,
+            )
+            return EXIT_USER_ERROR
         if bad:
             parser.error(f"unrecognized arguments: {' '.join(bad)}")
         args.overrides = [*args.overrides, *extra]
@@ -576,6 +585,29 @@ def main(argv: Sequence[str] | None = None) -> int:
     finally:
         if previous is not None:
             signal.signal(signal.SIGTERM, previous)
+
+
+def _setting_hint(unknown: Sequence[str], argv: Sequence[str]) -> str | None:
+    """For an unknown option ``--name [VALUE]`` of ``argv`` that names a setting
+    (``--format tum``), the message saying to pass it as ``key=VALUE`` after the config;
+    None when none does."""
+    from eslam.config import config_help
+
+    for item in unknown:
+        option, equals, value = item.partition("=")
+        if not equals:
+            position = list(argv).index(item)
+            after = argv[position + 1] if position + 1 < len(argv) else ""
+            value = after if after and not after.startswith("-") and "=" not in after else "VALUE"
+        name = option[2:].replace("-", "_")
+        keys = [row.key for row in config_help() if row.key.rsplit(".", 1)[-1] == name]
+        if keys:
+            settings = " or ".join(f"{key}={value}" for key in keys)
+            return (
+                f"{option} is no option here: settings follow the config as key=value, "
+                f"e.g. {settings}"
+            )
+    return None
 
 
 def _raise_interrupt(signum: int, frame: object) -> NoReturn:

@@ -277,3 +277,22 @@ def test_sigterm_stops_a_command_like_ctrl_c(
     assert cli.main(["resume", "somewhere"]) == 130
     assert "eslam resume: interrupted" in capsys.readouterr().err
     assert signal.getsignal(signal.SIGTERM) == before  # restored after the command
+
+
+@pytest.mark.parametrize(
+    ("argv", "setting"),
+    [
+        (["run", "configs/demo.yaml", "--format", "tum"], "data.format=tum"),
+        (["run", "configs/demo.yaml", "seed=1", "--format=scannet"], "data.format=scannet"),
+        (["demo", "--depth-scale", "1000"], "data.depth_scale=1000"),
+    ],
+)
+def test_an_option_that_is_a_setting_suggests_key_value(
+    argv: list[str], setting: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """`eslam run --format tum` (only inspect takes --format) was refused without saying
+    that settings follow the config as data.format=tum."""
+    assert main(argv) == EXIT_USER_ERROR
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1
+    assert setting in err and f"eslam {argv[0]} --help" in err and "Traceback" not in err
