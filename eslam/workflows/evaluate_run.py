@@ -59,6 +59,7 @@ class EvaluationOptions:
         device: where culling projects points.
         data: the run's sequence where it moved (its fingerprint must still match the
             run's input.json); None = config.yaml's data.path.
+        title: report.md's title; None = :func:`report_title` of the run folder.
     """
 
     gt_mesh: Path | None = None
@@ -72,6 +73,7 @@ class EvaluationOptions:
     max_edge: float | None = None
     device: str = "cpu"
     data: Path | None = None
+    title: str | None = None
 
 
 EVALUATION_KEYS = (
@@ -130,8 +132,15 @@ def evaluate_run(run_dir: str | Path, options: EvaluationOptions) -> dict[str, o
     if options.gt_mesh is not None:
         metrics.update(_reconstruction(run, config, estimated, options, settings))
     write_json(run.metrics, metrics)
-    write_report(run.root / "report.md", f"eslam run {run.root.name}", metrics, settings, images)
+    title = options.title or report_title(run.root)
+    write_report(run.root / "report.md", title, metrics, settings, images)
     return metrics
+
+
+def report_title(run_dir: Path) -> str:
+    """report.md's default title: the run folder as the user named it (``runs/room0``),
+    so two reports are told apart by more than a folder name like ``run``."""
+    return f"Evaluation of run {run_dir}"
 
 
 def _trajectory_error(

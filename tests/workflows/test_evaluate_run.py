@@ -87,3 +87,12 @@ def test_eval_of_a_folder_that_is_not_a_run(tmp_path: Path, capsys) -> None:
     assert main(["eval", str(tmp_path)]) == EXIT_USER_ERROR
     err = capsys.readouterr().err.strip()
     assert "config.yaml: not found: not a run folder" in err and "\n" not in err
+
+
+def test_report_title_names_the_run_folder(run) -> None:
+    """The title was "# eslam run run" for a folder named run (the demo's): it names the
+    folder as given, parents included."""
+    run_dir, _ = run
+    assert _eval(run_dir) == 0
+    title = (run_dir / "report.md").read_text().splitlines()[0]
+    assert title == f"# Evaluation of run {run_dir}"
