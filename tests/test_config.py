@@ -229,6 +229,28 @@ def test_post_init_checks_name_the_file_and_key(tmp_path: Path) -> None:
         SceneConfig(bound=[[0.0, 1.0]])
 
 
+@pytest.mark.parametrize("override", ["mapping.window=2", "field.truncation=0"])
+def test_a_bad_value_from_the_command_line_blames_the_command_line(
+    tmp_path: Path, override: str
+) -> None:
+    """A check naming several keys ("every must be >= 1, window >= 3") blamed the file
+    that set the first of them (configs/base.yaml), not the command line that set the
+    bad one."""
+    child = write(tmp_path / "child.yaml", f"inherit_from: {CONFIGS / 'base.yaml'}\n")
+    message = error_of(child, (override,))
+    assert message.startswith("command line: ") and "base.yaml" not in message
+    assert override.split(".")[1].split("=")[0] in message
+
+
+def test_a_bad_value_in_a_file_still_blames_that_file(tmp_path: Path) -> None:
+    child = write(
+        tmp_path / "child.yaml",
+        f"inherit_from: {CONFIGS / 'base.yaml'}\nmapping: {{window: 2}}\n",
+    )
+    message = error_of(child, ("mapping.every=2",))
+    assert message.startswith(f"{child}: ") and "window >= 3" in message
+
+
 def test_config_error_is_a_user_error() -> None:
     assert issubclass(ConfigError, ESLAMError)
 
