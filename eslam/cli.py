@@ -156,6 +156,17 @@ def _command_run(args: argparse.Namespace) -> int:
     return 0
 
 
+def _command_configs(args: argparse.Namespace) -> int:
+    from eslam.config.packaged import PACKAGED_CONFIGS, packaged_configs
+
+    configs = packaged_configs()
+    width = max(len(config.name) for config in configs)
+    print(f"packaged configs (in {PACKAGED_CONFIGS}); pass a name as CONFIG to eslam run:")
+    for config in configs:
+        print(f"  {config.name:<{width}}  {config.summary}".rstrip())
+    return 0
+
+
 def _command_resume(args: argparse.Namespace) -> int:
     import dataclasses
     import os
@@ -446,7 +457,10 @@ def build_parser() -> argparse.ArgumentParser:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     run.add_argument(
-        "config", metavar="CONFIG", help="YAML config (e.g. configs/replica/room0.yaml)"
+        "config",
+        metavar="CONFIG",
+        help="YAML config file, or a packaged config's name from any directory "
+        "(e.g. replica/room0; `eslam configs` lists them)",
     )
     run.add_argument("overrides", nargs="*", metavar="key=value", help="config overrides")
     run.add_argument("--data", help="sequence folder (sets data.path)")
@@ -457,6 +471,17 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--max-frames", type=int, help="use at most N frames (sets data.max_frames)")
     run.add_argument("--overwrite", action="store_true", help="reuse an existing run folder")
     run.set_defaults(handler=_command_run)
+
+    configs = commands.add_parser(
+        "configs",
+        help="list the packaged configs (names eslam run takes from any directory)",
+        description=(
+            "List the configs shipped with eslam (eslam/configs/), by the name `eslam run` "
+            "takes as CONFIG from any directory, e.g. `eslam run replica/room0 --data PATH`; "
+            "a path that exists is used as it is."
+        ),
+    )
+    configs.set_defaults(handler=_command_configs)
 
     resume = commands.add_parser(
         "resume",

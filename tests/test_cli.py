@@ -296,3 +296,15 @@ def test_an_option_that_is_a_setting_suggests_key_value(
     err = capsys.readouterr().err
     assert len(err.strip().splitlines()) == 1
     assert setting in err and f"eslam {argv[0]} --help" in err and "Traceback" not in err
+
+
+def test_configs_lists_the_packaged_names_from_any_directory(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    monkeypatch.chdir(tmp_path)
+    assert main(["configs"]) == 0
+    names = {line.split()[0] for line in capsys.readouterr().out.splitlines()[1:]}
+    assert {"demo", "cpu", "replica/room0", "tum/fr1_desk", "scannet/scene0000"} <= names
+    # and eslam run takes such a name from here (it stops at the missing data, exit 2)
+    assert main(["run", "replica/room0", "--out", str(tmp_path / "run")]) == EXIT_USER_ERROR
+    assert "data.path is not set" in capsys.readouterr().err

@@ -298,3 +298,29 @@ def test_config_help_lists_leaves_with_type_default_and_doc() -> None:
     assert "metres" in bound.doc
     assert rows["device"].default == '"cpu"'
     assert config_help(Toy)[-1].key.startswith("extra.")
+
+
+@pytest.mark.parametrize(
+    "name", ["replica/room0", "replica/room0.yaml", "configs/replica/room0.yaml", "demo", "cpu"]
+)
+def test_a_packaged_config_is_found_by_name_from_any_directory(
+    name: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """`eslam run demo.yaml` outside the repository said "config file not found"."""
+    monkeypatch.chdir(tmp_path)
+    expected = load_config(CONFIGS / f"{name.removeprefix('configs/').removesuffix('.yaml')}.yaml")
+    assert load_config(name) == expected
+
+
+def test_a_path_that_exists_wins_over_a_packaged_name(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.chdir(tmp_path)
+    write(tmp_path / "demo.yaml", "seed: 7\n")
+    assert load_config("demo.yaml").seed == 7
+    assert load_config("demo").seed == load_config(CONFIGS / "demo.yaml").seed
+
+
+def test_an_unknown_config_name_suggests_the_closest_and_eslam_configs(tmp_path: Path) -> None:
+    message = error_of("replica/room9")
+    assert "did you mean 'replica/room" in message and "eslam configs" in message

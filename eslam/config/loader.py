@@ -30,6 +30,7 @@ from typing import Any, Literal, NamedTuple, TypeVar, Union
 import yaml
 
 from eslam.atomic import write_text
+from eslam.config.packaged import find_config
 from eslam.config.schema import MOVED_KEYS, ESLAMConfig
 from eslam.errors import ConfigError
 
@@ -408,7 +409,9 @@ def load_config(
     """Load a YAML config (following ``inherit_from``), apply overrides, check everything.
 
     Args:
-        path: the YAML file; ``None`` starts from the schema's defaults.
+        path: the YAML file, or the name of a packaged config (``replica/room0``,
+            :func:`eslam.config.packaged.find_config`; an existing path wins); ``None``
+            starts from the schema's defaults.
         overrides: ``key.sub=value`` strings, applied in order after the files; each
             value is read as YAML (``1e-3``, ``[1, 2]``, ``null``) and then checked
             against the field's type. Text fields keep the raw text (``data.path=2024``).
@@ -426,10 +429,9 @@ def load_config(
     origins: Origins = {}
     source = "defaults"
     if path is not None:
+        path = find_config(path)  # a path that exists, else a packaged config's name
         source = str(path)
-        if not Path(path).is_file():
-            raise ConfigError(f"{source}: config file not found")
-        for name, layer in _load_chain(Path(path), source):
+        for name, layer in _load_chain(path, source):
             _merge(data, origins, layer, name)
     for text in overrides:
         _apply_override(text, schema, data, origins)
