@@ -241,6 +241,7 @@ def _command_eval(args: argparse.Namespace) -> int:
         max_unobserved_fraction=args.max_unobserved,
         device=args.device,
         data=Path(args.data).absolute() if args.data else None,
+        progress=True,
     )
     metrics = evaluate_run(args.run_dir, options)
     print(f"wrote {Path(args.run_dir) / 'metrics.json'} and report.md")

@@ -66,5 +66,6 @@ def run_demo(out_dir: str | Path, config: ESLAMConfig | None = None) -> DemoResu
         max_unobserved_fraction=DEMO_UNOBSERVED_FRACTION,
         device=config.device,
         title=DEMO_TITLE,
+        progress=config.output.progress,
     )
     return DemoResult(result.run_dir, evaluate_run(result.run_dir, options))

@@ -67,7 +67,13 @@ def test_eval_writes_every_metric_report_and_plots(run, capsys) -> None:
     assert "| Accuracy (cm) |" in report and "450,000" not in report and "50,000" in report
     for image in ("trajectory.png", "translation_error.png"):
         assert (run_dir / image).is_file() and f"]({image})" in report
-    assert "Depth L1" in capsys.readouterr().out
+    captured = capsys.readouterr()
+    assert "Depth L1" in captured.out
+    # minutes of culling, distances and ray casting were silent: a bar per stage
+    for stage in ("ATE and plots", "cull mesh.ply", "cull GT mesh", "accuracy and completion"):
+        assert stage in captured.err
+    assert "10/10 [" in captured.err and "depth L1" in captured.err and "15/15 [" in captured.err
+    assert captured.err.endswith("\n")  # every bar closed
 
 
 def test_reevaluation_drops_stale_metrics_and_nice_culls_less(run) -> None:
