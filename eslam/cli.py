@@ -171,6 +171,17 @@ def _command_run(args: argparse.Namespace) -> int:
     return 0
 
 
+def _command_configs(args: argparse.Namespace) -> int:
+    from eslam.config.packaged import PACKAGED_CONFIGS, packaged_configs
+
+    configs = packaged_configs()
+    width = max(len(config.name) for config in configs)
+    print(f"packaged configs (in {PACKAGED_CONFIGS}); pass a name as CONFIG to eslam run:")
+    for config in configs:
+        print(f"  {config.name:<{width}}  {config.summary}".rstrip())
+    return 0
+
+
 def _command_resume(args: argparse.Namespace) -> int:
     import dataclasses
     import os
@@ -245,6 +256,7 @@ def _command_eval(args: argparse.Namespace) -> int:
         max_unobserved_fraction=args.max_unobserved,
         device=args.device,
         data=Path(args.data).absolute() if args.data else None,
+        progress=True,
     )
     metrics = evaluate_run(args.run_dir, options)
     print(f"wrote {Path(args.run_dir) / 'metrics.json'} and report.md")
@@ -467,7 +479,10 @@ def build_parser() -> argparse.ArgumentParser:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     run.add_argument(
-        "config", metavar="CONFIG", help="YAML config (e.g. configs/replica/room0.yaml)"
+        "config",
+        metavar="CONFIG",
+        help="YAML config file, or a packaged config's name from any directory "
+        "(e.g. replica/room0; `eslam configs` lists them)",
     )
     run.add_argument("overrides", nargs="*", metavar="key=value", help="config overrides")
     run.add_argument("--data", help="sequence folder (sets data.path)")
@@ -478,6 +493,17 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--max-frames", type=int, help="use at most N frames (sets data.max_frames)")
     run.add_argument("--overwrite", action="store_true", help="reuse an existing run folder")
     run.set_defaults(handler=_command_run)
+
+    configs = commands.add_parser(
+        "configs",
+        help="list the packaged configs (names eslam run takes from any directory)",
+        description=(
+            "List the configs shipped with eslam (eslam/configs/), by the name `eslam run` "
+            "takes as CONFIG from any directory, e.g. `eslam run replica/room0 --data PATH`; "
+            "a path that exists is used as it is."
+        ),
+    )
+    configs.set_defaults(handler=_command_configs)
 
     resume = commands.add_parser(
         "resume",
@@ -582,6 +608,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     if extra:
         overridable = hasattr(args, "overrides")
         bad = [item for item in extra if not overridable or item.startswith("-") or "=" not in item]
+        given = list(sys.argv[1:] if argv is None else argv)
+        options = [item for item in extra if item.startswith("--")]
+        hint = _setting_hint(options, given) if overridable else None
+        if hint is not None:
+            print(
+                f"eslam {args.command}: error: {hint} (see eslam {args.command} --help)",
+                file=sys.stderr,
+            )
+            return EXIT_USER_ERROR
         if bad:
             parser.error(f"unrecognized arguments: {' '.join(bad)}")
         args.overrides = [*args.overrides, *extra]
@@ -608,6 +643,29 @@ def main(argv: Sequence[str] | None = None) -> int:
     finally:
         if previous is not None:
             signal.signal(signal.SIGTERM, previous)
+
+
+def _setting_hint(unknown: Sequence[str], argv: Sequence[str]) -> str | None:
+    """For an unknown option ``--name [VALUE]`` of ``argv`` that names a setting
+    (``--format tum``), the message saying to pass it as ``key=VALUE`` after the config;
+    None when none does."""
+    from eslam.config import config_help
+
+    for item in unknown:
+        option, equals, value = item.partition("=")
+        if not equals:
+            position = list(argv).index(item)
+            after = argv[position + 1] if position + 1 < len(argv) else ""
+            value = after if after and not after.startswith("-") and "=" not in after else "VALUE"
+        name = option[2:].replace("-", "_")
+        keys = [row.key for row in config_help() if row.key.rsplit(".", 1)[-1] == name]
+        if keys:
+            settings = " or ".join(f"{key}={value}" for key in keys)
+            return (
+                f"{option} is no option here: settings follow the config as key=value, "
+                f"e.g. {settings}"
+            )
+    return None
 
 
 def _raise_interrupt(signum: int, frame: object) -> NoReturn:

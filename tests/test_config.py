@@ -253,6 +253,28 @@ def test_counts_are_checked_at_load_naming_the_key(override: str, least: int) ->
     assert message.startswith(f"command line: {key} must be >= {least}"), message
 
 
+@pytest.mark.parametrize("override", ["mapping.window=2", "field.truncation=0"])
+def test_a_bad_value_from_the_command_line_blames_the_command_line(
+    tmp_path: Path, override: str
+) -> None:
+    """A check naming several keys ("every must be >= 1, window >= 3") blamed the file
+    that set the first of them (configs/base.yaml), not the command line that set the
+    bad one."""
+    child = write(tmp_path / "child.yaml", f"inherit_from: {CONFIGS / 'base.yaml'}\n")
+    message = error_of(child, (override,))
+    assert message.startswith("command line: ") and "base.yaml" not in message
+    assert override.split(".")[1].split("=")[0] in message
+
+
+def test_a_bad_value_in_a_file_still_blames_that_file(tmp_path: Path) -> None:
+    child = write(
+        tmp_path / "child.yaml",
+        f"inherit_from: {CONFIGS / 'base.yaml'}\nmapping: {{window: 2}}\n",
+    )
+    message = error_of(child, ("mapping.every=2",))
+    assert message.startswith(f"{child}: ") and "window >= 3" in message
+
+
 def test_config_error_is_a_user_error() -> None:
     assert issubclass(ConfigError, ESLAMError)
 
@@ -300,3 +322,29 @@ def test_config_help_lists_leaves_with_type_default_and_doc() -> None:
     assert "metres" in bound.doc
     assert rows["device"].default == '"cpu"'
     assert config_help(Toy)[-1].key.startswith("extra.")
+
+
+@pytest.mark.parametrize(
+    "name", ["replica/room0", "replica/room0.yaml", "configs/replica/room0.yaml", "demo", "cpu"]
+)
+def test_a_packaged_config_is_found_by_name_from_any_directory(
+    name: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """`eslam run demo.yaml` outside the repository said "config file not found"."""
+    monkeypatch.chdir(tmp_path)
+    expected = load_config(CONFIGS / f"{name.removeprefix('configs/').removesuffix('.yaml')}.yaml")
+    assert load_config(name) == expected
+
+
+def test_a_path_that_exists_wins_over_a_packaged_name(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.chdir(tmp_path)
+    write(tmp_path / "demo.yaml", "seed: 7\n")
+    assert load_config("demo.yaml").seed == 7
+    assert load_config("demo").seed == load_config(CONFIGS / "demo.yaml").seed
+
+
+def test_an_unknown_config_name_suggests_the_closest_and_eslam_configs(tmp_path: Path) -> None:
+    message = error_of("replica/room9")
+    assert "did you mean 'replica/room" in message and "eslam configs" in message

@@ -19,6 +19,7 @@ import inspect
 import itertools
 import json
 import os
+import re
 import textwrap
 import types
 import typing
@@ -29,6 +30,7 @@ from typing import Any, Literal, NamedTuple, TypeVar, Union
 import yaml
 
 from eslam.atomic import write_text
+from eslam.config.packaged import find_config
 from eslam.config.schema import MOVED_KEYS, ESLAMConfig
 from eslam.errors import ConfigError
 
@@ -235,14 +237,52 @@ def _build(
     try:
         return schema(**values)
     except ValueError as error:  # from __post_init__; it names the field first, if it can
-        named = [name for name in data if str(error).startswith(f"{name} ")]
-        if named:
-            where = _origin(origins, (*path, named[0]), source)
+        where = _blame(schema, values, data, origins, (path, source), str(error))
+        if any(str(error).startswith(f"{name} ") for name in data):
             raise ConfigError(f"{where}: {prefix}{error}") from None
-        given = [_origin(origins, (*path, name), source) for name in data]
-        where = ", ".join(dict.fromkeys(given)) or source
         what = f"section '{prefix[:-1]}'" if path else "config"
         raise ConfigError(f"{where}: invalid {what}: {error}") from None
+
+
+def _blame(
+    schema: type,
+    values: dict[str, Any],
+    data: Mapping,
+    origins: Origins,
+    at: tuple[tuple[str, ...], str],
+    message: str,
+) -> str:
+    """Where the value a section's check rejected (``message``) came from.
+
+    A check may name several keys ("every must be >= 1, window >= 3"): the culprits are
+    the named keys whose value, put back to its default, lets the section pass. Their
+    origin is blamed, the command line first (a value typed there, never the file that
+    set a sibling); without culprits, the origins of every named key (of all the
+    section's keys when it names none). ``at`` is (section path, default origin).
+    """
+    path, source = at
+    named = [n for n in data if re.search(rf"\b{re.escape(str(n))}\b", message)] or list(data)
+    culprits = [n for n in named if _passes_without(schema, values, n)]
+    found = [o for n in culprits or named for o in _origins_within(origins, (*path, n), source)]
+    if culprits and COMMAND_LINE in found:
+        return COMMAND_LINE
+    return ", ".join(dict.fromkeys(found)) or source
+
+
+def _passes_without(schema: type, values: dict[str, Any], name: str) -> bool:
+    """Whether ``schema`` accepts ``values`` with ``name`` left at its default."""
+    try:
+        schema(**{k: v for k, v in values.items() if k != name})
+    except (ValueError, TypeError):
+        return False
+    return True
+
+
+def _origins_within(origins: Origins, at: tuple[str, ...], default: str) -> list[str]:
+    """Where the key ``at`` and everything under it came from (a section's keys may come
+    from several files and the command line)."""
+    inside = [origin for key, origin in origins.items() if key[: len(at)] == at]
+    return inside or [_origin(origins, at, default)]
 
 
 def config_from_dict(
@@ -369,7 +409,9 @@ def load_config(
     """Load a YAML config (following ``inherit_from``), apply overrides, check everything.
 
     Args:
-        path: the YAML file; ``None`` starts from the schema's defaults.
+        path: the YAML file, or the name of a packaged config (``replica/room0``,
+            :func:`eslam.config.packaged.find_config`; an existing path wins); ``None``
+            starts from the schema's defaults.
         overrides: ``key.sub=value`` strings, applied in order after the files; each
             value is read as YAML (``1e-3``, ``[1, 2]``, ``null``) and then checked
             against the field's type. Text fields keep the raw text (``data.path=2024``).
@@ -387,10 +429,9 @@ def load_config(
     origins: Origins = {}
     source = "defaults"
     if path is not None:
+        path = find_config(path)  # a path that exists, else a packaged config's name
         source = str(path)
-        if not Path(path).is_file():
-            raise ConfigError(f"{source}: config file not found")
-        for name, layer in _load_chain(Path(path), source):
+        for name, layer in _load_chain(path, source):
             _merge(data, origins, layer, name)
     for text in overrides:
         _apply_override(text, schema, data, origins)

@@ -287,6 +287,7 @@ class FileSequence:
         """The (colour, depth) files of frame ``index``, e.g. to fingerprint the input."""
         return self._colour_paths[index], self._depth_paths[index]
 
+
 __all__ = [
     "COMMON_DEPTH_SCALES",
     "DEPTH_MEDIAN_RANGE_M",

@@ -34,6 +34,7 @@ Where we differ from the release, and why:
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -230,6 +231,7 @@ def depth_l1(
     ground_truth: TriangleMesh,
     options: DepthL1Options | None = None,
     ground_truth_uncut: TriangleMesh | None = None,
+    on_view: Callable[[int], None] | None = None,
 ) -> DepthL1Result:
     """Depth L1 between two meshes over random virtual views (module docstring).
 
@@ -239,6 +241,8 @@ def depth_l1(
             sets the camera region.
         options: defaults to the release's settings (1000 views, 500 x 500, focal 300).
         ground_truth_uncut: the GT before culling, to reject views of unobserved space.
+        on_view: called with the number of views scored so far after each one
+            (progress: a thousand views take minutes).
 
     Returns:
         The depth L1 in cm with the number of views used and rejected.
@@ -274,5 +278,7 @@ def depth_l1(
             rejected += 1
             continue
         errors.append(error)
+        if on_view is not None:
+            on_view(len(errors))
     mean = 100.0 * float(np.mean(errors)) if errors else float("nan")
     return DepthL1Result(depth_l1_cm=mean, views_used=len(errors), views_rejected=rejected)

@@ -33,7 +33,7 @@ from eslam.config.device import resolve_device
 from eslam.data import RGBDSequence, open_sequence
 from eslam.data.depth_units import DepthCheck, sequence_depth_file, sequence_depth_scale
 from eslam.data.source import FrameSource, SequenceSource, source_length
-from eslam.errors import ConfigError, InputError, RunInterrupted
+from eslam.errors import ConfigError, ESLAMError, InputError, RunInterrupted
 from eslam.field.scene_field import SceneField
 from eslam.render.rays import camera_directions
 from eslam.slam.bounds_policy import (
@@ -48,6 +48,7 @@ from eslam.slam.observers import (
     FrameDone,
     LogObserver,
     MappingDone,
+    MappingStep,
     Observers,
     RunEnd,
     RunObserver,
@@ -70,6 +71,7 @@ from eslam.slam.state import (
     new_field,
     quality_row,
 )
+from eslam.slam.step_events import counting_steps
 from eslam.slam.stops import interrupted_early, save_on_failure, stopped_error
 from eslam.slam.trackers import make_tracker, predict_pose
 from eslam.slam.tracking import TrackingQuality
@@ -289,16 +291,24 @@ class RunLoop:
         frame_of = store.frame_indices
         oldest = min(window, key=lambda k: frame_of[k])
         optimise = [self.config.mapping.optimise_poses and k != oldest for k in window]
-        schedule = mapping_schedule(self.config.mapping, first=len(store) == 1)
-        result = map_window(
-            field,
-            views,
-            store.poses[window].to(self.device),
-            optimise,
-            self.mapping,
-            schedule,
-            generator=state.generator,
-        )
+        first = len(store) == 1
+        schedule = mapping_schedule(self.config.mapping, first=first)
+
+        def progress(done: int) -> None:
+            self.observers.on_mapping_step(MappingStep(index, done, schedule.iterations, first))
+
+        progress(0)
+        anchor = field.decoder_parameters()[0]  # held by the mapping optimiser only
+        with counting_steps(anchor, progress):
+            result = map_window(
+                field,
+                views,
+                store.poses[window].to(self.device),
+                optimise,
+                self.mapping,
+                schedule,
+                generator=state.generator,
+            )
         moved = [i for i, flag in enumerate(optimise) if flag]
         if moved:
             state.trajectory.set_poses([frame_of[window[i]] for i in moved], result.poses[moved])
@@ -375,9 +385,22 @@ def run_log(path: Path) -> Iterator[logging.Logger]:
     logger.addHandler(handler)
     try:
         yield logger
+    except BaseException as error:
+        log_stop(logger, error)
+        raise
     finally:
         logger.removeHandler(handler)
         handler.close()
+
+
+def log_stop(logger: logging.Logger, error: BaseException) -> None:
+    """Log what stopped the run, as the user is told it (the ``eslam resume`` command
+    included), so log.txt ends with it too; a bug (no user error, no interruption) with
+    its traceback, which the screen shows but a closed terminal loses."""
+    if isinstance(error, ESLAMError | KeyboardInterrupt):
+        logger.error("stopped: %s", str(error) or type(error).__name__)
+    else:
+        logger.error("stopped by an error: %s", error, exc_info=error)
 
 
 def _open_input(
@@ -452,6 +475,7 @@ def run_slam(
             memory = PeakMemory(device)
             writer = RunWriter(run, config, memory)
             writer.saved_frames = state.next_frame
+            progress = ProgressObserver(config.output.progress)
             try:
                 if sequence is not None:
                     source = SequenceSource(sequence, start=state.next_frame)
@@ -459,25 +483,26 @@ def run_slam(
                 remaining = source_length(source)
                 total = None if remaining is None else state.next_frame + remaining
                 memory.start()
-                progress = ProgressObserver(config.output.progress)
                 everyone = Observers([writer, LogObserver(run_logger), progress, *observers])
                 loop = RunLoop(config, state, device, everyone, source.name, run_logger)
                 if resume and not state.last_mapped and isinstance(source, SequenceSource):
                     loop.last_frame = source.frame(state.next_frame - 1)
-                everyone.on_start(
-                    RunStart(config, run.root, state, device, source.name, remaining, resume)
-                )
-                try:
+                try:  # a failure while starting or finishing (the mesh) is a failure too
+                    everyone.on_start(
+                        RunStart(config, run.root, state, device, source.name, remaining, resume)
+                    )
                     end = loop.run(source, total, stop_after)
+                    everyone.on_finish(end)
                 except BaseException as error:
                     save_on_failure(everyone, error, state.next_frame, run_logger)
                     raise
-                everyone.on_finish(end)
             except BaseException as error:
                 stopped = stopped_error(error, writer.saved_frames, run.root)
                 if stopped is error:
                     raise
                 raise stopped from error
+            finally:
+                progress.close()  # before anyone prints the error: it gets its own line
             poses = state.trajectory.poses.detach().cpu().double().numpy()
             return RunResult(run_dir=run.root, poses=poses, metrics=dict(writer.metrics or {}))
     except KeyboardInterrupt as interrupt:

@@ -1,7 +1,8 @@
 """The observer seam: what the run loop tells the world, and the protocol to listen.
 
-The loop calls every observer at the run's start, after each frame, after each mapping
-call, at the finish and on a failure; observers never change the run. The run writer
+The loop calls every observer at the run's start, after each frame, at the start and
+after each iteration of a mapping call, after each mapping call, at the finish and on a
+failure; observers never change the run. The run writer
 (:mod:`eslam.slam.run_writer`), the progress bar (:mod:`eslam.slam.progress`) and the
 log lines (:class:`LogObserver`) are observers; a viewer or a live trajectory stream are
 more of them, passed to :func:`eslam.slam.loop.run_slam` as ``observers=``.
@@ -91,6 +92,25 @@ class MappingDone:
     loss: torch.Tensor
 
 
+@dataclass(frozen=True)
+class MappingStep:
+    """Progress of a mapping call: sent before its first iteration (``done`` = 0) and
+    after each one, so a long call (the first frame's: 1000 iterations in the paper,
+    minutes on a CPU) is visibly alive. Counts only: no loss, so no host sync.
+
+    Attributes:
+        index: the frame being mapped.
+        done: iterations finished so far.
+        iterations: iterations of the call.
+        first: the map's first call (the empty map: the long one).
+    """
+
+    index: int
+    done: int
+    iterations: int
+    first: bool
+
+
 @dataclass(frozen=True, eq=False)
 class RunEnd:
     """The run stopped: the stream ended (``complete``) or it was stopped early.
@@ -118,6 +138,10 @@ class RunObserver(Protocol):
         """After each frame."""
         ...
 
+    def on_mapping_step(self, step: MappingStep) -> None:
+        """At the start and after each iteration of a mapping call (keep it cheap)."""
+        ...
+
     def on_mapping(self, mapping: MappingDone) -> None:
         """After each mapping call."""
         ...
@@ -139,6 +163,9 @@ class RunObserverBase:
 
     def on_frame(self, frame: FrameDone) -> None:
         """After each frame."""
+
+    def on_mapping_step(self, step: MappingStep) -> None:
+        """At the start and after each iteration of a mapping call."""
 
     def on_mapping(self, mapping: MappingDone) -> None:
         """After each mapping call."""
@@ -163,6 +190,14 @@ class Observers(RunObserverBase):
     def on_frame(self, frame: FrameDone) -> None:
         for observer in self.observers:
             observer.on_frame(frame)
+
+    def on_mapping_step(self, step: MappingStep) -> None:
+        """Tell the observers that listen (an observer written before this event, without
+        the method, is skipped)."""
+        for observer in self.observers:
+            listen = getattr(observer, "on_mapping_step", None)
+            if listen is not None:
+                listen(step)
 
     def on_mapping(self, mapping: MappingDone) -> None:
         for observer in self.observers:

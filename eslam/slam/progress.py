@@ -1,13 +1,22 @@
-"""The progress bar, as a run observer: frames/s and, with ground truth, the running ATE."""
+"""The progress bar, as a run observer: frames/s and, with ground truth, the running ATE.
+
+The first frame of a process is unlike the rest (the map's first mapping call runs
+``mapping.first_iterations``, minutes on a CPU, and the first steps compile and warm
+caches), so it gets a bar of its own over those mapping iterations, and the frames
+bar's rate and ETA count from the end of that frame: a 5-minute run no longer starts
+by promising 2 hours. The bars are closed before the run's error or "interrupted"
+line is printed, so that line stands on its own under them.
+"""
 
 from __future__ import annotations
 
 import sys
+from typing import TextIO
 
 import numpy as np
 
 from eslam.evaluate.trajectory import absolute_trajectory_error
-from eslam.slam.observers import FrameDone, RunEnd, RunObserverBase, RunStart
+from eslam.slam.observers import FrameDone, MappingStep, RunEnd, RunObserverBase, RunStart
 
 ATE_EVERY = 10
 """Frames between updates of the running ATE shown in the progress bar."""
@@ -23,12 +32,21 @@ def finite_ate_pairs(estimated: np.ndarray, gt: np.ndarray) -> np.ndarray:
 
 
 class ProgressObserver(RunObserverBase):
-    """A tqdm bar over the frames (total unknown for a live stream); does nothing when off."""
+    """A tqdm bar over the frames (total unknown for a live stream) and one over the first
+    mapping call's iterations; does nothing when off (module doc).
 
-    def __init__(self, enabled: bool) -> None:
+    Args:
+        enabled: draw the bars.
+        file: where to draw them (default: stderr, looked up when the run starts).
+    """
+
+    def __init__(self, enabled: bool, file: TextIO | None = None) -> None:
         self.enabled = enabled
+        self.file = file
         self.bar = None
+        self.mapping_bar = None
         self.state = None
+        self._clock_restarted = False
 
     def on_start(self, start: RunStart) -> None:
         if not self.enabled:
@@ -38,12 +56,39 @@ class ProgressObserver(RunObserverBase):
         done = start.state.next_frame
         total = None if start.frames is None else done + start.frames
         self.state = start.state
-        self.bar = tqdm(total=total, initial=done, unit="frame", file=sys.stderr)
+        self.bar = tqdm(total=total, initial=done, unit="frame", file=self._file())
+
+    def _file(self) -> TextIO:
+        return self.file if self.file is not None else sys.stderr
+
+    def on_mapping_step(self, step: MappingStep) -> None:
+        """The first mapping call's iterations on a second bar, closed when it is done."""
+        if self.bar is None or not step.first:
+            return
+        if self.mapping_bar is None and step.done < step.iterations:
+            from tqdm import tqdm
+
+            self.mapping_bar = tqdm(
+                total=step.iterations,
+                desc=f"mapping frame {step.index} (the map's first call)",
+                unit="it",
+                leave=False,
+                file=self._file(),
+            )
+        if self.mapping_bar is not None:
+            self.mapping_bar.update(step.done - self.mapping_bar.n)
+            if step.done >= step.iterations:
+                self._close_mapping()
 
     def on_frame(self, frame: FrameDone) -> None:
         if self.bar is None or self.state is None:
             return
-        self.bar.update(1)
+        self._close_mapping()
+        if self._clock_restarted:
+            self.bar.update(1)
+        else:  # the process's first frame: counted, but not in the rate
+            restart_clock(self.bar, self.bar.n + 1)
+            self._clock_restarted = True
         index = frame.index
         if index >= 2 and (index + 1) % ATE_EVERY == 0:
             trajectory = self.state.trajectory
@@ -56,13 +101,28 @@ class ProgressObserver(RunObserverBase):
                 ate = absolute_trajectory_error(estimated[usable], gt[usable])
                 self.bar.set_postfix(ate_cm=f"{100 * ate.rmse:.2f}")
 
-    def _close(self) -> None:
+    def _close_mapping(self) -> None:
+        if self.mapping_bar is not None:
+            self.mapping_bar.close()
+            self.mapping_bar = None
+
+    def close(self) -> None:
+        """Close the bars (again is fine): the run loop does so however the run ends."""
+        self._close_mapping()
         if self.bar is not None:
             self.bar.close()
             self.bar = None
 
     def on_finish(self, end: RunEnd) -> None:
-        self._close()
+        self.close()
 
     def on_failure(self, error: BaseException, frames: int) -> None:
-        self._close()
+        self.close()
+
+
+def restart_clock(bar, done: int) -> None:
+    """Show ``done`` on the tqdm ``bar`` and count its rate and ETA from now, with
+    ``done`` as the starting count (``reset`` clears the clock and the smoothed rate)."""
+    bar.reset(total=bar.total)
+    bar.initial = bar.n = bar.last_print_n = done
+    bar.refresh()

@@ -8,11 +8,17 @@ Every file is written atomically, so a crash leaves the last complete version. A
 checkpoint that cannot be written (disk full, read-only) stops the run with a
 :class:`~eslam.errors.RunStopped` that counts the frames of the last checkpoint that
 was written (the earlier map.pt is intact), so `eslam resume` continues from there.
+
+metrics.json is merged, never clobbered, when the run resumed and added no frame (a
+finished run resumed again): the keys ``eslam eval`` added still describe the same
+frames and mesh, so they are kept. A run that processed frames since (or a new run)
+writes only its own keys: earlier evaluation keys would describe another map.
 """
 
 from __future__ import annotations
 
 import contextlib
+import json
 from collections.abc import Iterator
 
 import numpy as np
@@ -65,6 +71,15 @@ def run_metrics(state: SLAMState, device: str, peak_memory_mb: float) -> dict:
     return metrics
 
 
+def previous_metrics(run: RunDirectory) -> dict:
+    """The run folder's metrics.json as it is ({} when missing or unreadable)."""
+    try:
+        metrics = json.loads(run.metrics.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return {}
+    return metrics if isinstance(metrics, dict) else {}
+
+
 class RunWriter(RunObserverBase):
     """Writes the run folder ``run`` as the run goes (module doc).
 
@@ -72,6 +87,7 @@ class RunWriter(RunObserverBase):
         metrics: metrics.json's contents once the run finished (None before).
         saved_frames: frames in the last map.pt written (what a resume continues from;
             a resumed run's to begin with).
+        resumed_at: frames the run had when this process resumed it (None: a new run).
     """
 
     def __init__(self, run: RunDirectory, config: ESLAMConfig, memory: PeakMemory) -> None:
@@ -81,10 +97,12 @@ class RunWriter(RunObserverBase):
         self.state: SLAMState | None = None
         self.metrics: dict | None = None
         self.saved_frames = 0
+        self.resumed_at: int | None = None
 
     def on_start(self, start: RunStart) -> None:
         self.state = start.state
         self.saved_frames = start.state.next_frame
+        self.resumed_at = start.state.next_frame if start.resumed else None
 
     def on_frame(self, frame: FrameDone) -> None:
         if (frame.index + 1) % self.config.output.checkpoint_every == 0:
@@ -103,18 +121,27 @@ class RunWriter(RunObserverBase):
                 state.field, self.config.output.mesh_resolution, state.observed_views()
             )
             write_mesh_ply(self.run.mesh, mesh)
-        self.metrics = run_metrics(state, str(self.memory.device), self.memory.peak_mb())
-        write_json(self.run.metrics, self.metrics)
+        self.metrics = self._write_metrics(state)
 
     def on_failure(self, error: BaseException, frames: int) -> None:
         if self.state is not None and frames > 0:
             with self._stop_on_failed_checkpoint():
                 self.checkpoint()
-            state = self._state()
-            write_json(
-                self.run.metrics,
-                run_metrics(state, str(self.memory.device), self.memory.peak_mb()),
-            )
+            self._write_metrics(self._state())
+
+    def _write_metrics(self, state: SLAMState) -> dict:
+        """Write metrics.json (merged with the earlier one when no frame was added since
+        the resume: module doc); return what was written."""
+        metrics = run_metrics(state, str(self.memory.device), self.memory.peak_mb())
+        if self.resumed_at is not None:
+            previous = previous_metrics(self.run)
+            if state.next_frame == self.resumed_at:
+                metrics = {**previous, **metrics}
+            peak = previous.get("peak_memory_mb")
+            if isinstance(peak, int | float):  # the run's peak over all its processes
+                metrics["peak_memory_mb"] = max(float(peak), metrics["peak_memory_mb"])
+        write_json(self.run.metrics, metrics)
+        return metrics
 
     @contextlib.contextmanager
     def _stop_on_failed_checkpoint(self) -> Iterator[None]:

@@ -23,6 +23,11 @@ DEMO_SCENE = SynthConfig(frames=60, width=160, height=120, seed=0)
 """The demo's synthetic sequence: 60 frames of the procedural room."""
 DEMO_DEPTH_L1_VIEWS = 200
 """Virtual depth-L1 views of the demo (the protocol's 1000 take ~4 min more on 2 cores)."""
+DEMO_TITLE = (
+    f"eslam demo: synthetic room ({DEMO_SCENE.frames} frames, "
+    f"{DEMO_SCENE.width}x{DEMO_SCENE.height}, seed {DEMO_SCENE.seed})"
+)
+"""report.md's title of the demo's run."""
 DEMO_UNOBSERVED_FRACTION = 0.5
 """Share of a virtual view's pixels that may see unobserved space (module docstring)."""
 
@@ -60,5 +65,7 @@ def run_demo(out_dir: str | Path, config: ESLAMConfig | None = None) -> DemoResu
         depth_l1_views=DEMO_DEPTH_L1_VIEWS,
         max_unobserved_fraction=DEMO_UNOBSERVED_FRACTION,
         device=config.device,
+        title=DEMO_TITLE,
+        progress=config.output.progress,
     )
     return DemoResult(result.run_dir, evaluate_run(result.run_dir, options))

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
@@ -39,6 +39,7 @@ from eslam.mesh.cull import CullCameras, CullOptions, cull_mesh
 from eslam.slam.run_folder import check_same_input
 from eslam.types import TriangleMesh
 from eslam.viz.plots import plot_trajectories, plot_translation_error
+from eslam.workflows.progress import StageProgress
 
 
 @dataclass(frozen=True)
@@ -59,6 +60,8 @@ class EvaluationOptions:
         device: where culling projects points.
         data: the run's sequence where it moved (its fingerprint must still match the
             run's input.json); None = config.yaml's data.path.
+        title: report.md's title; None = :func:`report_title` of the run folder.
+        progress: a bar per stage on stderr (culling, distances, depth L1: minutes).
     """
 
     gt_mesh: Path | None = None
@@ -72,6 +75,8 @@ class EvaluationOptions:
     max_edge: float | None = None
     device: str = "cpu"
     data: Path | None = None
+    title: str | None = None
+    progress: bool = False
 
     def __post_init__(self) -> None:
         """Refuse counts that would score nothing (or crash deep in the metrics)."""
@@ -129,8 +134,10 @@ def evaluate_run(run_dir: str | Path, options: EvaluationOptions) -> dict[str, o
     settings: list[str] = []
     images: list[tuple[str, str]] = []
     timestamps, estimated = read_trajectory(run.trajectory, allow_missing=True)
+    progress = StageProgress(options.progress)
     if run.trajectory_gt.is_file():
-        ate = _trajectory_error(run, timestamps, estimated)
+        with progress.stage("ATE and plots"):
+            ate = _trajectory_error(run, timestamps, estimated)
         metrics.update({k: v for k, v in ate.as_dict().items() if k.startswith("ate_")})
         metrics["ate_frames"] = ate.pairs
         settings.append(
@@ -140,10 +147,17 @@ def evaluate_run(run_dir: str | Path, options: EvaluationOptions) -> dict[str, o
         images += [("Trajectory (top and side views)", TRAJECTORY_PLOT)]
         images += [("Per-frame translation error", ERROR_PLOT)]
     if options.gt_mesh is not None:
-        metrics.update(_reconstruction(run, config, estimated, options, settings))
+        metrics.update(_reconstruction(run, config, estimated, options, (settings, progress)))
     write_json(run.metrics, metrics)
-    write_report(run.root / "report.md", f"eslam run {run.root.name}", metrics, settings, images)
+    title = options.title or report_title(run.root)
+    write_report(run.root / "report.md", title, metrics, settings, images)
     return metrics
+
+
+def report_title(run_dir: Path) -> str:
+    """report.md's default title: the run folder as the user named it (``runs/room0``),
+    so two reports are told apart by more than a folder name like ``run``."""
+    return f"Evaluation of run {run_dir}"
 
 
 def _trajectory_error(
@@ -173,8 +187,11 @@ def _reconstruction(
     config: ESLAMConfig,
     estimated: np.ndarray,
     options: EvaluationOptions,
-    settings: list[str],
+    notes: tuple[list[str], StageProgress],
 ) -> dict[str, object]:
+    """The mesh metrics; appends how they were measured to ``notes``' settings and shows
+    each stage on ``notes``' progress."""
+    settings, progress = notes
     if not run.mesh.is_file():
         raise InputError(run.mesh, "not found", f"extract it with `eslam mesh {run.root}`")
     reconstruction = read_mesh_ply(run.mesh)
@@ -182,16 +199,23 @@ def _reconstruction(
     sequence = _run_sequence(run, config, options.data)
     frames = np.arange(0, min(len(sequence), len(estimated)), options.cull_every)
     cull = CullOptions(config.field.truncation, options.max_edge, options.device)
-    rec_culled = _culled(reconstruction, sequence, estimated, frames, options, cull)
     gt_poses = sequence.gt_poses()
     if gt_poses is None:
         raise InputError(
             sequence.root, "has no ground-truth poses to cull the GT mesh with", "use --protocol"
         )
-    gt_culled = _culled(ground_truth, sequence, gt_poses, frames, options, cull)
+    culls = (("cull mesh.ply", estimated, reconstruction), ("cull GT mesh", gt_poses, ground_truth))
+    culled = []
+    for name, poses, mesh in culls:
+        with progress.stage(name, len(frames), "frame") as advance:
+            culled.append(
+                _culled(mesh, sequence, poses, frames, CullRequest(options, cull, advance))
+            )
+    rec_culled, gt_culled = culled
     write_mesh_ply(run.mesh_culled, rec_culled)
     recon = ReconstructionOptions(samples=options.samples, seed=options.seed, exact=options.exact)
-    result = evaluate_reconstruction(rec_culled, gt_culled, recon).as_dict()
+    with progress.stage("accuracy and completion"):
+        result = evaluate_reconstruction(rec_culled, gt_culled, recon).as_dict()
     metrics: dict[str, object] = {k: v for k, v in result.items() if k not in ("samples", "exact")}
     mode = "exact point-to-surface" if options.exact else "sample-to-sample (KD-tree)"
     settings.append(
@@ -203,7 +227,8 @@ def _reconstruction(
         views = DepthL1Options(views=options.depth_l1_views, seed=options.seed)
         pixels = int(options.max_unobserved_fraction * views.width * views.height)
         views = dataclasses.replace(views, max_unobserved_pixels=pixels)
-        depth = depth_l1(rec_culled, gt_culled, views, ground_truth_uncut=ground_truth)
+        with progress.stage("depth L1", views.views, "view") as advance:
+            depth = depth_l1(rec_culled, gt_culled, views, ground_truth, advance)
         metrics["depth_l1_cm"] = depth.depth_l1_cm
         settings.append(
             f"depth L1: {depth.views_used} random virtual views ({views.width}x{views.height}, "
@@ -224,20 +249,36 @@ def _run_sequence(run: RunDirectory, config: ESLAMConfig, data: Path | None) -> 
     return sequence
 
 
+@dataclass(frozen=True)
+class CullRequest:
+    """How to cull one mesh: the evaluation's options, the culling settings, and the
+    progress callback (frames read so far)."""
+
+    options: EvaluationOptions
+    cull: CullOptions
+    advance: Callable[[int], None]
+
+
 def _culled(
     mesh: TriangleMesh,
     sequence: RGBDSequence,
     poses: np.ndarray,
     frames: np.ndarray,
-    options: EvaluationOptions,
-    cull: CullOptions,
+    request: CullRequest,
 ) -> TriangleMesh:
     usable = frames[np.isfinite(poses[frames]).all(axis=(1, 2))]
-    depths = _depths(sequence, usable) if options.protocol == "eslam" else None
+    protocol = request.options.protocol
+    depths = _depths(sequence, usable, request.advance) if protocol == "eslam" else None
     cameras = CullCameras(poses[usable], sequence.intrinsics, depths)
-    return cull_mesh(mesh, cameras, options.protocol, cull)
+    culled = cull_mesh(mesh, cameras, protocol, request.cull)
+    request.advance(len(frames))  # also the frames left out and those without depth read
+    return culled
 
 
-def _depths(sequence: RGBDSequence, frames: np.ndarray) -> Iterator[np.ndarray]:
-    for index in frames:
+def _depths(
+    sequence: RGBDSequence, frames: np.ndarray, advance: Callable[[int], None]
+) -> Iterator[np.ndarray]:
+    """The depth maps of ``frames``, read one at a time (culling streams them)."""
+    for done, index in enumerate(frames):
         yield sequence[int(index)].depth
+        advance(done + 1)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -74,10 +75,33 @@ def test_resume_gives_the_same_trajectory(sequence: Path, full_run, tmp_path: Pa
     partial = run_slam(config, out, stop_after=7)
     assert partial.metrics["frames"] == 7
     assert not (out / "mesh.ply").exists(), "an unfinished run writes no mesh"
+    _add_metrics(out, accuracy_cm=1.0)  # `eslam eval` of the interrupted run
     resumed = run_slam(load_config(out / "config.yaml"), out, resume=True)
     assert resumed.metrics["frames"] == FRAMES
     np.testing.assert_allclose(resumed.poses, full_run.poses, rtol=0, atol=1e-7)
     assert "resuming" in (out / "log.txt").read_text()
+    # frames were added: a score of the 7-frame map no longer describes the run
+    assert "accuracy_cm" not in json.loads((out / "metrics.json").read_text())
+
+
+def _add_metrics(run_dir: Path, **keys: float) -> dict:
+    path = run_dir / "metrics.json"
+    metrics = {**json.loads(path.read_text()), **keys}
+    path.write_text(json.dumps(metrics))
+    return metrics
+
+
+def test_resuming_a_finished_run_keeps_the_keys_eslam_eval_added(full_run, tmp_path: Path) -> None:
+    """Resuming a finished run rewrote metrics.json with the run's keys only."""
+    out = tmp_path / "finished"
+    shutil.copytree(full_run.run_dir, out)
+    before = _add_metrics(out, accuracy_cm=1.5, depth_l1_cm=2.5, peak_memory_mb=1e6)
+    resumed = run_slam(load_config(out / "config.yaml"), out, resume=True)
+    after = json.loads((out / "metrics.json").read_text())
+    assert after == resumed.metrics
+    assert after["accuracy_cm"] == 1.5 and after["depth_l1_cm"] == 2.5
+    assert after["frames"] == before["frames"] == FRAMES
+    assert after["peak_memory_mb"] == 1e6  # the peak over every process of the run
 
 
 def test_cli_run_refuses_an_existing_run_and_missing_data(

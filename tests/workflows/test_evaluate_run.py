@@ -67,7 +67,13 @@ def test_eval_writes_every_metric_report_and_plots(run, capsys) -> None:
     assert "| Accuracy (cm) |" in report and "450,000" not in report and "50,000" in report
     for image in ("trajectory.png", "translation_error.png"):
         assert (run_dir / image).is_file() and f"]({image})" in report
-    assert "Depth L1" in capsys.readouterr().out
+    captured = capsys.readouterr()
+    assert "Depth L1" in captured.out
+    # minutes of culling, distances and ray casting were silent: a bar per stage
+    for stage in ("ATE and plots", "cull mesh.ply", "cull GT mesh", "accuracy and completion"):
+        assert stage in captured.err
+    assert "10/10 [" in captured.err and "depth L1" in captured.err and "15/15 [" in captured.err
+    assert captured.err.endswith("\n")  # every bar closed
 
 
 def test_reevaluation_drops_stale_metrics_and_nice_culls_less(run) -> None:
@@ -134,3 +140,12 @@ def test_eval_into_a_read_only_run_folder_is_one_line(run, monkeypatch, capsys) 
     monkeypatch.undo()
     after = {p.name: p.read_bytes() for p in run_dir.iterdir() if p.is_file()}
     assert after == before  # nothing half-written, no temporaries left
+
+
+def test_report_title_names_the_run_folder(run) -> None:
+    """The title was "# eslam run run" for a folder named run (the demo's): it names the
+    folder as given, parents included."""
+    run_dir, _ = run
+    assert _eval(run_dir) == 0
+    title = (run_dir / "report.md").read_text().splitlines()[0]
+    assert title == f"# Evaluation of run {run_dir}"
