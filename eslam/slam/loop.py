@@ -71,7 +71,6 @@ from eslam.slam.state import (
     new_field,
     quality_row,
 )
-from eslam.slam.step_events import counting_steps
 from eslam.slam.stops import interrupted_early, save_on_failure, stopped_error
 from eslam.slam.trackers import make_tracker, predict_pose
 from eslam.slam.tracking import TrackingQuality
@@ -298,17 +297,16 @@ class RunLoop:
             self.observers.on_mapping_step(MappingStep(index, done, schedule.iterations, first))
 
         progress(0)
-        anchor = field.decoder_parameters()[0]  # held by the mapping optimiser only
-        with counting_steps(anchor, progress):
-            result = map_window(
-                field,
-                views,
-                store.poses[window].to(self.device),
-                optimise,
-                self.mapping,
-                schedule,
-                generator=state.generator,
-            )
+        result = map_window(
+            field,
+            views,
+            store.poses[window].to(self.device),
+            optimise,
+            self.mapping,
+            schedule,
+            generator=state.generator,
+            on_step=progress,
+        )
         moved = [i for i, flag in enumerate(optimise) if flag]
         if moved:
             state.trajectory.set_poses([frame_of[window[i]] for i in moved], result.poses[moved])

@@ -15,6 +15,7 @@ optimises (the first frame longer and faster, as the release does).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import torch
@@ -214,6 +215,7 @@ def map_window(
     settings: MappingSettings,
     schedule: MappingSchedule,
     generator: torch.Generator,
+    on_step: Callable[[int], None] | None = None,
 ) -> MappingResult:
     """Optimise ``field`` (in place) and the poses flagged in ``optimise`` on a window.
 
@@ -223,6 +225,8 @@ def map_window(
         optimise: per keyframe, whether its pose is refined.
         schedule: iterations, learning-rate factor and decay, rays
             (:func:`mapping_schedule`).
+        on_step: called with k after the k-th iteration (1, 2, ...): a count for
+            progress reports, never a value read from the device (no host sync).
     """
     window = WindowPoses.create(poses, optimise)
     optimiser = mapping_optimiser(field, window, settings.mapping, schedule.lr_factor)
@@ -236,6 +240,8 @@ def map_window(
         loss = mapping_step(
             field, views, window, optimiser, settings, generator, rays=schedule.rays
         )
+        if on_step is not None:
+            on_step(step + 1)
     with torch.no_grad():
         refined = window.current().detach().clone()
     return MappingResult(poses=refined, loss=loss)

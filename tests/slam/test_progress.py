@@ -14,7 +14,6 @@ from eslam.errors import RunInterrupted
 from eslam.slam.loop import run_slam
 from eslam.slam.observers import FrameDone, MappingStep, RunObserverBase, RunStart
 from eslam.slam.progress import ProgressObserver
-from eslam.slam.step_events import counting_steps
 from tests.conftest import tiny_config
 
 FIRST_ITERATIONS = 20
@@ -69,19 +68,6 @@ def test_the_first_mapping_call_has_its_own_bar() -> None:
     assert progress.mapping_bar is None  # later calls are short: no second bar
     progress.close()
     assert "mapping frame 0 (the map's first call)" in out.getvalue()
-
-
-def test_counting_steps_counts_only_the_given_parameters_optimiser() -> None:
-    mine, other = torch.nn.Parameter(torch.zeros(2)), torch.nn.Parameter(torch.zeros(2))
-    optimisers = [torch.optim.Adam([mine]), torch.optim.Adam([other])]
-    counts: list[int] = []
-    with counting_steps(mine, counts.append):
-        for _ in range(3):
-            for optimiser in optimisers:
-                (mine.sum() + other.sum()).backward()
-                optimiser.step()
-    optimisers[0].step()  # after the call: not counted
-    assert counts == [1, 2, 3]
 
 
 class Recorder(RunObserverBase):
