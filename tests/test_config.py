@@ -272,7 +272,7 @@ def test_a_bad_value_in_a_file_still_blames_that_file(tmp_path: Path) -> None:
         f"inherit_from: {CONFIGS / 'base.yaml'}\nmapping: {{window: 2}}\n",
     )
     message = error_of(child, ("mapping.every=2",))
-    assert message.startswith(f"{child}: ") and "window >= 3" in message
+    assert message.startswith(f"{child}: ") and "mapping.window must be >= 3" in message
 
 
 def test_config_error_is_a_user_error() -> None:

@@ -39,6 +39,10 @@ class DataConfig:
     depth_scale: float | None = None
     """Depth image units per metre; null = the layout's own (Replica 6553.5 or its
     cam_params.json, ScanNet and 7-Scenes 1000, TUM 5000, folder: its intrinsics file)."""
+    depth_check: bool = True
+    """Refuse depth whose median or far end no indoor RGB-D sensor sees (a wrong
+    depth_scale or unit; eslam.data.depth_units); false for close-range or outdoor
+    captures that are right as they are."""
     resize: tuple[int, int] | None = None
     """Resize colour and depth to [width, height] before cropping; null = the layout's
     default (TUM 512x384 as the release, others none). Intrinsics follow."""

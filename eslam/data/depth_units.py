@@ -159,12 +159,18 @@ class DepthCheck:
     bound_diagonal: float | None = None
 
     @classmethod
-    def for_run(cls, depth_scale: float | None, bound: list[list[float]] | None) -> DepthCheck:
-        """The check of a run reading depth with ``depth_scale``, in ``scene.bound`` (or None)."""
+    def for_run(
+        cls,
+        depth_scale: float | None,
+        bound: list[list[float]] | None,
+        enabled: bool = True,
+    ) -> DepthCheck:
+        """The check of a run reading depth with ``depth_scale``, in ``scene.bound`` (or
+        None); ``enabled`` is ``data.depth_check``."""
         diagonal = None
         if bound is not None:
             diagonal = float(np.linalg.norm([high - low for low, high in bound]))
-        return cls(True, depth_scale, diagonal)
+        return cls(enabled, depth_scale, diagonal)
 
     def problem(self, depth: np.ndarray, where: str | Path, frame: str) -> InputError | None:
         """The error to raise for a frame's (H, W) depth in metres, or None if plausible.
@@ -197,17 +203,23 @@ class DepthCheck:
     def _fix(self, spread: DepthSpread) -> str:
         factors = suggested_factors(spread, self.depth_scale, self.bound_diagonal)
         if not factors:
-            return "check data.depth_scale and the unit of the depth files"
+            return (
+                "check data.depth_scale and the unit of the depth files "
+                "(data.depth_check=false if this depth is right)"
+            )
         if self.depth_scale is None:
             options = " or ".join(f"{f:.4g}x (median {spread.median_m * f:.2f} m)" for f in factors)
-            return f"the depth looks off by a factor of {options}: fix its unit"
+            return (
+                f"the depth looks off by a factor of {options}: fix its unit "
+                "(data.depth_check=false if this depth is right)"
+            )
         options = " or ".join(
             f"data.depth_scale={_scale_text(self.depth_scale / f)} "
             f"(median {spread.median_m * f:.2f} m)"
             for f in factors
         )
         now = _scale_text(self.depth_scale)
-        return f"likely {options} instead of {now}"
+        return f"likely {options} instead of {now} (data.depth_check=false if this depth is right)"
 
 
 def sequence_depth_scale(sequence: object) -> float | None:

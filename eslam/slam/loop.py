@@ -132,7 +132,9 @@ class RunLoop:
         self._frames_without_depth = 0
         self._last_failed = False
         self._before_mapping: tuple[dict[str, torch.Tensor], torch.Tensor] | None = None
-        self.depth_check = DepthCheck.for_run(config.data.depth_scale, config.scene.bound)
+        self.depth_check = DepthCheck.for_run(
+            config.data.depth_scale, config.scene.bound, config.data.depth_check
+        )
 
     def run(self, frames: Iterable[Frame], total: int | None, stop_after: int | None) -> RunEnd:
         """Process ``frames`` (``total`` of them in the whole run, None if unknown) until
@@ -409,7 +411,12 @@ def _open_input(
     if config.data.path is None:
         raise ConfigError("data.path is not set (pass --data PATH or set data.path in the config)")
     sequence = open_sequence(config.data)
-    preflight(sequence, DepthCheck.for_run(sequence_depth_scale(sequence), config.scene.bound))
+    preflight(
+        sequence,
+        DepthCheck.for_run(
+            sequence_depth_scale(sequence), config.scene.bound, config.data.depth_check
+        ),
+    )
     return None, sequence
 
 

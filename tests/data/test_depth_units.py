@@ -131,7 +131,20 @@ def test_run_on_depth_over_ten_is_refused_before_writing(
     assert err.count("\n") == 1 and "Traceback" not in err
     assert f"{depth_over_ten / 'results' / 'depth000000.png'}: frame 0: median depth" in err
     assert "data.depth_scale=655.35 " in err  # 10x smaller than Replica's 6553.5
+    assert "data.depth_check=false" in err  # the way out for depth that is right
     assert not out.exists()
+
+
+def test_data_depth_check_false_lets_a_close_range_capture_run(
+    depth_over_ten: Path, tmp_path: Path
+) -> None:
+    from eslam.config import load_config
+    from eslam.slam.loop import run_slam
+
+    overrides = [f"data.path={depth_over_ten}", *TINY, "output.mesh=false"]
+    config = load_config(DEMO_CONFIG, [*overrides, "data.depth_check=false"])
+    result = run_slam(config, tmp_path / "run", stop_after=1)
+    assert result.metrics["frames"] == 1
 
 
 def test_inspect_reports_depth_over_ten(depth_over_ten: Path, capsys) -> None:
