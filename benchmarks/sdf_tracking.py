@@ -1,0 +1,144 @@
+"""Seconds per frame of the SDF tracker on a finished run's map, per point pyramid.
+
+The map of RUN (its map.pt and config.yaml) is frozen and each frame 1..N of the run's
+sequence is tracked by the SDF tracker alone (:class:`eslam.slam.sdf_tracking.SdfTracker`,
+the run's ``tracking.sdf`` settings with ``levels`` replaced) from the previous frame's
+ground-truth pose, i.e. the error a tracker without a motion model starts from. Per
+point pyramid it reports the median and maximum wall time per frame, the mean
+translation error against the ground truth, and the mean iterations.
+
+    python benchmarks/sdf_tracking.py runs/room0 --levels 1000,4000 500,2000 2000
+
+Prints a markdown table and, unless ``--no-append``, appends it to docs/benchmarks.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import datetime
+import statistics
+import sys
+import time
+from pathlib import Path
+
+import torch
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import itertools
+
+from _machine import DEFAULT_DOCS, command_line, load_average, machine_lines, publish
+
+from eslam.config import load_config
+from eslam.data import open_sequence
+from eslam.field.scene_field import SceneField
+from eslam.geometry.pose import pose_distance
+from eslam.io.checkpoint import load_checkpoint
+from eslam.render.rays import camera_directions
+from eslam.slam.sdf_tracking import SdfTracker
+from eslam.slam.views import make_view
+
+
+@dataclasses.dataclass(frozen=True)
+class Row:
+    levels: tuple[int, ...]
+    median_s: float
+    max_s: float
+    error_mm: float
+    iterations: float
+
+
+def measure(args: argparse.Namespace) -> list[Row]:
+    config = load_config(args.run / "config.yaml")
+    saved = load_checkpoint(args.run / "map.pt")
+    field = SceneField.from_state(config.field, saved["field"])
+    field.requires_grad_(False)
+    sequence = open_sequence(config.data)
+    directions = camera_directions(sequence.intrinsics)
+    count = min(args.frames, len(sequence) - 1)
+    frames = [sequence[i] for i in range(count + 1)]
+    rows = []
+    for levels in args.levels:
+        tracker = SdfTracker(dataclasses.replace(config.tracking.sdf, levels=levels))
+        seconds, errors, iterations = [], [], []
+        for previous, frame in itertools.pairwise(frames):
+            if previous.pose_gt is None or frame.pose_gt is None:
+                raise SystemExit(f"{args.run}: the sequence needs ground-truth poses")
+            view = make_view(
+                torch.from_numpy(frame.rgb).float() / 255.0,
+                torch.from_numpy(frame.depth),
+                directions,
+                config.tracking.border,
+            )
+            start = torch.from_numpy(previous.pose_gt).float()
+            begin = time.perf_counter()
+            result = tracker.track(field, view, start, torch.Generator().manual_seed(frame.index))
+            seconds.append(time.perf_counter() - begin)
+            translation, _ = pose_distance(result.pose, torch.from_numpy(frame.pose_gt).float())
+            errors.append(1000.0 * float(translation))
+            assert result.quality is not None
+            iterations.append(result.quality.iterations)
+        rows.append(
+            Row(
+                levels,
+                statistics.median(seconds),
+                max(seconds),
+                statistics.mean(errors),
+                statistics.mean(iterations),
+            )
+        )
+        print(rows[-1], flush=True)
+    return rows
+
+
+def table(rows: list[Row]) -> str:
+    lines = [
+        "| levels (points) | median (s/frame) | max (s/frame) | mean error (mm) | iterations |",
+        "|---|---:|---:|---:|---:|",
+    ]
+    for row in rows:
+        lines.append(
+            f"| {', '.join(map(str, row.levels))} | {row.median_s:.3f} | {row.max_s:.3f} "
+            f"| {row.error_mm:.2f} | {row.iterations:.1f} |"
+        )
+    return "\n".join(lines) + "\n"
+
+
+def parse_args(argv: list[str] | None) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("run", type=Path, help="a finished run folder (map.pt, config.yaml)")
+    parser.add_argument(
+        "--levels", nargs="+", default=["1000,4000"], help="point pyramids, e.g. 500,2000"
+    )
+    parser.add_argument("--frames", type=int, default=19, help="frames tracked (1..N)")
+    parser.add_argument("--threads", type=int, default=2)
+    parser.add_argument("--docs", type=Path, default=DEFAULT_DOCS)
+    parser.add_argument("--no-append", action="store_true")
+    parser.add_argument("--note", default="")
+    args = parser.parse_args(argv)
+    args.levels = [tuple(int(n) for n in text.split(",")) for text in args.levels]
+    return args
+
+
+def main(argv: list[str] | None = None) -> None:
+    args = parse_args(argv)
+    torch.set_num_threads(args.threads)
+    command = command_line("benchmarks/sdf_tracking.py", argv)
+    load_start = load_average()
+    rows = measure(args)
+    now = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    lines = [
+        f"## sdf_tracking, {now}, cpu",
+        "",
+        *machine_lines(torch.device("cpu"), (load_start, load_average())),
+        f"- command: `{command}`",
+        f"- workload: the map of `{args.run}`, frames 1-{args.frames} of its sequence, "
+        "each tracked from the previous frame's ground-truth pose",
+    ]
+    if args.note:
+        lines.append(f"- note: {args.note}")
+    publish("\n".join([*lines, "", table(rows)]), args.docs, args.no_append)
+
+
+if __name__ == "__main__":
+    main()
