@@ -62,3 +62,26 @@ def test_redkitchen_has_no_hand_set_bound() -> None:
         config = load_config(CONFIGS / "sevenscenes" / name)
         assert config.data.format == "sevenscenes"
         assert config.scene.bound is None and config.scene.grow
+
+
+PAPER = sorted(p for d in ("replica", "scannet", "tum") for p in (CONFIGS / d).glob("*.yaml"))
+PAPER = [p for p in PAPER if not p.stem.endswith("_cpu")]
+
+
+@pytest.mark.parametrize("path", PAPER, ids=[str(p.relative_to(CONFIGS)) for p in PAPER])
+def test_paper_configs_keep_the_papers_tracker_and_first_frame(path: Path) -> None:
+    config = load_config(path)
+    assert config.tracking.method == "render"
+    assert (config.mapping.first_iterations, config.mapping.first_lr_factor) == (1000, 5.0)
+
+
+FAST = ["demo.yaml", "folder.yaml", "replica/room0_cpu.yaml", "sevenscenes/redkitchen_cpu.yaml"]
+
+
+@pytest.mark.parametrize("name", FAST)
+def test_presets_track_with_hybrid_after_a_short_first_frame(name: str) -> None:
+    """docs/results.md: hybrid with a 60-step first frame tracked best on the demo,
+    Replica room0 and 7-Scenes; the presets for users default to it."""
+    config = load_config(CONFIGS / name)
+    assert config.tracking.method == "hybrid"
+    assert config.mapping.first_iterations <= 100
