@@ -75,7 +75,13 @@ def test_paper_configs_keep_the_papers_tracker_and_first_frame(path: Path) -> No
     assert (config.mapping.first_iterations, config.mapping.first_lr_factor) == (1000, 5.0)
 
 
-FAST = ["demo.yaml", "folder.yaml", "replica/room0_cpu.yaml", "sevenscenes/redkitchen_cpu.yaml"]
+FAST = [
+    "demo.yaml",
+    "folder.yaml",
+    "replica/room0_cpu.yaml",
+    "sevenscenes/redkitchen.yaml",
+    "sevenscenes/redkitchen_cpu.yaml",
+]
 
 
 @pytest.mark.parametrize("name", FAST)
