@@ -73,6 +73,26 @@ def check_depth_found(frames_without_depth: int, source: str) -> None:
         )
 
 
+def check_some_depth(index: int, total: int | None, keyframes: int, source: str) -> None:
+    """Refuse a run whose every frame lacks valid depth, at its last frame ``index``.
+
+    Such a run (a bound given, or fewer frames than :data:`AUTO_BOUND_SEARCH`) would
+    otherwise finish with exit 0, an empty map and poses that are only predictions: the
+    user must hear that the depth is missing (all zero, or unreadable as depth).
+
+    Raises:
+        InputError: ``index`` is the last of ``total`` frames and no frame was mapped
+            (``keyframes`` is 0: the first frame with depth is always a keyframe).
+    """
+    if keyframes == 0 and total is not None and index + 1 >= total:
+        raise InputError(
+            Path(source),
+            f"none of its {total} frames has valid depth (every depth pixel is 0), so "
+            "there is nothing to map",
+            "check the depth images and data.depth_scale (`eslam inspect PATH` shows their range)",
+        )
+
+
 def bound_from_frame(
     scene: SceneConfig, frame: Frame, pose: torch.Tensor, logger: logging.Logger = log
 ) -> torch.Tensor:

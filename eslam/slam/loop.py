@@ -39,6 +39,7 @@ from eslam.render.rays import camera_directions
 from eslam.slam.bounds_policy import (
     bound_from_frame,
     check_depth_found,
+    check_some_depth,
     cover_keyframe,
     first_pose,
 )
@@ -130,6 +131,7 @@ class RunLoop:
         self.directions = camera_directions(state.keyframes.intrinsics, device)
         self.last_frame: Frame | None = None
         self._frames_without_depth = 0
+        self._total: int | None = None
         self._last_failed = False
         self._before_mapping: tuple[dict[str, torch.Tensor], torch.Tensor] | None = None
         self.depth_check = DepthCheck.for_run(
@@ -143,6 +145,7 @@ class RunLoop:
         On any error the frame in progress is rolled back before the error propagates.
         """
         state = self.state
+        self._total = total
         began = time.perf_counter()
         iterator: Iterator[Frame] = iter(frames)
         complete = True
@@ -196,6 +199,7 @@ class RunLoop:
                 index,
                 frame.timestamp,
             )
+            check_some_depth(index, self._total, len(state.keyframes), self.source)
         tracked = False
         quality = None
         if index == 0:

@@ -8,6 +8,8 @@ Every file is written atomically, so a crash leaves the last complete version. A
 checkpoint that cannot be written (disk full, read-only) stops the run with a
 :class:`~eslam.errors.RunStopped` that counts the frames of the last checkpoint that
 was written (the earlier map.pt is intact), so `eslam resume` continues from there.
+Nothing is saved before the first frame with valid depth (no keyframe yet): nothing
+was learnt, the poses are only predictions, and a resume must start at frame 0.
 
 metrics.json is merged, never clobbered, when the run resumed and added no frame (a
 finished run resumed again): the keys ``eslam eval`` added still describe the same
@@ -105,6 +107,9 @@ class RunWriter(RunObserverBase):
         self.resumed_at = start.state.next_frame if start.resumed else None
 
     def on_frame(self, frame: FrameDone) -> None:
+        # before the first frame with depth nothing is learnt: a resume must start at 0
+        if len(self._state().keyframes) == 0:
+            return
         if (frame.index + 1) % self.config.output.checkpoint_every == 0:
             with self._stop_on_failed_checkpoint():
                 self.checkpoint()
@@ -124,7 +129,7 @@ class RunWriter(RunObserverBase):
         self.metrics = self._write_metrics(state)
 
     def on_failure(self, error: BaseException, frames: int) -> None:
-        if self.state is not None and frames > 0:
+        if self.state is not None and frames > 0 and len(self.state.keyframes) > 0:
             with self._stop_on_failed_checkpoint():
                 self.checkpoint()
             self._write_metrics(self._state())

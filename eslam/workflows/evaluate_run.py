@@ -163,6 +163,12 @@ def report_title(run_dir: Path) -> str:
 def _trajectory_error(
     run: RunDirectory, timestamps: np.ndarray, estimated: np.ndarray
 ) -> ATEResult:
+    if len(timestamps) < 3:  # a run stopped after a frame or two: not a broken folder
+        raise InputError(
+            run.trajectory,
+            f"holds {len(timestamps)} frames, and the ATE needs at least 3",
+            f"continue the run with `eslam resume {run.root}`, then evaluate it",
+        )
     gt_times, gt = read_trajectory(run.trajectory_gt, ground_truth=True, allow_missing=True)
     est_index, gt_index = associate_timestamps(timestamps, gt_times, 1e-6)
     usable = np.isfinite(estimated[est_index]).all(axis=(1, 2)) & np.isfinite(gt[gt_index]).all(

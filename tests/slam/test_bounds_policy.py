@@ -2,18 +2,21 @@
 
 from __future__ import annotations
 
+import shutil
 from pathlib import Path
 
 import numpy as np
 import pytest
 import torch
+from PIL import Image
 
+from eslam.cli import EXIT_USER_ERROR, main
 from eslam.config import DataConfig, ESLAMConfig, load_config
 from eslam.data import open_sequence
 from eslam.errors import InputError
 from eslam.geometry.bounds import depth_points, fraction_outside
 from eslam.io.checkpoint import load_checkpoint
-from eslam.slam.bounds_policy import bound_from_frame, check_depth_found
+from eslam.slam.bounds_policy import bound_from_frame, check_depth_found, check_some_depth
 from eslam.slam.loop import run_slam
 from eslam.synthetic import read_synthetic_bound
 from eslam.workflows.demo import DEMO_CONFIG
@@ -142,3 +145,33 @@ def test_bound_from_the_first_frame_with_depth(sequence: Path, tmp_path: Path) -
     assert fraction_outside(first, estimated) < 0.01
     centre = torch.from_numpy(frames.gt_poses()[0][:3, 3]).float()
     assert bool((estimated[:, 0] < centre - 0.49).all() and (estimated[:, 1] > centre).all())
+
+
+def test_the_last_frame_refuses_a_run_without_any_depth() -> None:
+    with pytest.raises(InputError, match=r"data: none of its 12 frames has valid depth"):
+        check_some_depth(11, 12, 0, "data")
+    check_some_depth(10, 12, 0, "data")  # a later frame may still have depth
+    check_some_depth(11, 12, 1, "data")  # a frame was mapped
+    check_some_depth(11, None, 0, "data")  # a stream of unknown length
+
+
+@pytest.mark.parametrize("bound_given", [True, False])
+def test_a_sequence_without_any_depth_is_one_line_and_saves_nothing(
+    sequence: Path, tmp_path: Path, bound_given: bool, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # issue 15's failure drills: all-zero depth finished with exit 0, an empty map and
+    # metrics of predicted poses; its depthless frames were checkpointed, so a resume
+    # after fixing the depth would have skipped them
+    zero = tmp_path / "zero"
+    shutil.copytree(sequence, zero)
+    for path in (zero / "results").glob("depth*.png"):
+        Image.fromarray(np.zeros_like(np.asarray(Image.open(path)))).save(path)
+    run = tmp_path / "run"
+    bound = [f"scene.bound={read_synthetic_bound(sequence)}"] if bound_given else []
+    args = ["run", str(DEMO_CONFIG), "--data", str(zero), "--out", str(run), *TINY, *bound]
+    assert main([*args, "output.checkpoint_every=2"]) == EXIT_USER_ERROR
+    err = capsys.readouterr().err.strip()
+    assert f"none of its {FRAMES} frames has valid depth" in err
+    assert "before its first frame was complete" in err and f"eslam resume {run}" in err
+    assert "\n" not in err and "Traceback" not in err
+    assert not (run / "map.pt").exists() and not (run / "trajectory.txt").exists()

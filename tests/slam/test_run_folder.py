@@ -35,9 +35,12 @@ def _run_args(sequence: Path, out: Path, *extra: str) -> list[str]:
 
 
 def _one_line(capsys: pytest.CaptureFixture[str]) -> str:
+    """The error line, the only one; eval's closed stage bars may stand before it."""
     err = capsys.readouterr().err.strip()
-    assert err and "\n" not in err and "Traceback" not in err
-    return err
+    lines = err.splitlines()
+    assert lines and "Traceback" not in err
+    assert [line for line in lines if line.startswith("eslam ")] == lines[-1:]
+    return lines[-1]
 
 
 def _snapshot(folder: Path) -> dict[str, bytes]:

@@ -92,8 +92,10 @@ def test_a_stream_without_depth_and_bound_is_refused(tiny_sequence: Path, tmp_pa
     blank = (f for f in frames for _ in range(3))  # 36 frames ...
     empty = (type(f)(f.index, f.rgb, np.zeros_like(f.depth), f.intrinsics) for f in blank)
     config = load_config(DEMO_CONFIG, [*TINY, "output.mesh=false"])  # no scene.bound
-    with pytest.raises(RunStopped, match=r"first 30 frames has valid depth.*stopped after 29"):
+    # nothing was learnt from the 29 depthless frames: none is saved, a resume starts at 0
+    with pytest.raises(RunStopped, match=r"first 30 frames has valid depth.*before its first"):
         run_slam(config, tmp_path / "r", source=IterableSource(intrinsics, empty))
+    assert not (tmp_path / "r" / "map.pt").exists()
 
 
 def test_a_corrupt_depth_image_stops_the_run_and_resume_finishes_it(
