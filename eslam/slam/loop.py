@@ -134,8 +134,10 @@ class RunLoop:
         self._total: int | None = None
         self._last_failed = False
         self._before_mapping: tuple[dict[str, torch.Tensor], torch.Tensor] | None = None
+        # no scene bound: one set too small is grown (or, growth off, warned about), a
+        # matter of the bound and not of depth units
         self.depth_check = DepthCheck.for_run(
-            config.data.depth_scale, config.scene.bound, config.data.depth_check
+            config.data.depth_scale, bound=None, enabled=config.data.depth_check
         )
 
     def run(self, frames: Iterable[Frame], total: int | None, stop_after: int | None) -> RunEnd:
@@ -418,7 +420,7 @@ def _open_input(
     preflight(
         sequence,
         DepthCheck.for_run(
-            sequence_depth_scale(sequence), config.scene.bound, config.data.depth_check
+            sequence_depth_scale(sequence), bound=None, enabled=config.data.depth_check
         ),
     )
     return None, sequence
