@@ -52,6 +52,7 @@ from eslam.io.run_lock import LOCK_NAME
 from eslam.synthetic import SynthConfig, read_synthetic_bound, write_synthetic_sequence
 from eslam.synthetic.sequence import generate_sequence
 from eslam.testing import write_folder_sequence
+from eslam.testing.tiny import TINY_SETTINGS
 from eslam.workflows.demo import DEMO_CONFIG
 
 DEFAULT_DOCS = REPO / "docs" / "reliability.md"
@@ -60,24 +61,7 @@ HEADING = "## Failure drills"
 FRAMES = 8
 """Frames of the drills' synthetic sequence: enough for checkpoints at 2, 4 and 6."""
 
-TINY = [
-    "tracking.method=render",
-    "tracking.render.rays=200",
-    "tracking.border=4",
-    "tracking.render.iterations=8",
-    "mapping.rays=400",
-    "mapping.every=3",
-    "mapping.window=4",
-    "mapping.iterations=6",
-    "mapping.first_iterations=60",
-    "render.samples_stratified=12",
-    "render.samples_surface=6",
-    "output.progress=false",
-    "output.checkpoint_every=2",
-    "output.mesh_resolution=0.1",
-    "field.geometry_resolution=[0.24,0.12]",
-    "field.appearance_resolution=[0.24,0.12]",
-]
+TINY = [*TINY_SETTINGS, "output.checkpoint_every=2"]
 """Settings that make a run of the drills' sequence take seconds on one CPU thread (the
 first frame maps 60 steps: long enough to be interrupted in)."""
 

@@ -14,6 +14,8 @@ os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 # torch is imported after the OpenMP setting, which it reads at import.
 import torch
 
+from eslam.testing.tiny import TINY_SETTINGS
+
 torch.set_num_threads(int(os.environ.get("ESLAM_TEST_THREADS", "2")))
 
 
@@ -29,28 +31,8 @@ def real_data() -> Path:
     return path
 
 
-TINY = [
-    # The loop tests keep the paper's tracker: on these coarse planes (0.24 / 0.12 m
-    # cells) the learned TSDF is too rough for the SDF stage of the demo's `hybrid`
-    # (0.76 cm ATE against 0.50 cm); the trackers have their own tests.
-    "tracking.method=render",
-    "tracking.render.rays=200",
-    "tracking.border=4",
-    "tracking.render.iterations=8",
-    "mapping.rays=400",
-    "mapping.every=3",
-    "mapping.window=4",
-    "mapping.iterations=6",
-    "mapping.first_iterations=60",
-    "render.samples_stratified=12",
-    "render.samples_surface=6",
-    "output.progress=false",
-    "output.checkpoint_every=4",
-    "output.mesh_resolution=0.1",
-    "field.geometry_resolution=[0.24, 0.12]",
-    "field.appearance_resolution=[0.24, 0.12]",
-]
-"""Settings small enough for CI (2 cores): coarser planes, few rays and iterations."""
+TINY = list(TINY_SETTINGS)
+"""Settings small enough for CI (2 cores): :data:`eslam.testing.tiny.TINY_SETTINGS`."""
 
 TINY_FRAMES = 12
 """Frames of the shared tiny synthetic sequence (80x60, seed 3)."""
