@@ -5,7 +5,10 @@ sequence is tracked by the SDF tracker alone (:class:`eslam.slam.sdf_tracking.Sd
 the run's ``tracking.sdf`` settings with ``levels`` replaced) from the previous frame's
 ground-truth pose, i.e. the error a tracker without a motion model starts from. Per
 point pyramid it reports the median and maximum wall time per frame, the mean
-translation error against the ground truth, and the mean iterations.
+translation error against the ground truth, the mean iterations, and the smallest
+eigenvalue of the normalised information at the ground-truth poses (minimum and median
+over the frames; :func:`eslam.slam.sdf_tracking.normalised_information`: near 0 means a
+degenerate view, e.g. one plane).
 
     python benchmarks/sdf_tracking.py runs/room0 --levels 1000,4000 500,2000 2000
 
@@ -35,7 +38,7 @@ from eslam.field.scene_field import SceneField
 from eslam.geometry.pose import pose_distance
 from eslam.io.checkpoint import load_checkpoint
 from eslam.render.rays import camera_directions
-from eslam.slam.sdf_tracking import SdfTracker
+from eslam.slam.sdf_tracking import SdfTracker, linearise, normalised_information, sdf_points
 from eslam.slam.views import make_view
 
 
@@ -46,6 +49,8 @@ class Row:
     max_s: float
     error_mm: float
     iterations: float
+    information_min: float
+    information_median: float
 
 
 def measure(args: argparse.Namespace) -> list[Row]:
@@ -60,7 +65,7 @@ def measure(args: argparse.Namespace) -> list[Row]:
     rows = []
     for levels in args.levels:
         tracker = SdfTracker(dataclasses.replace(config.tracking.sdf, levels=levels))
-        seconds, errors, iterations = [], [], []
+        seconds, errors, iterations, smallest = [], [], [], []
         for previous, frame in itertools.pairwise(frames):
             if previous.pose_gt is None or frame.pose_gt is None:
                 raise SystemExit(f"{args.run}: the sequence needs ground-truth poses")
@@ -70,11 +75,15 @@ def measure(args: argparse.Namespace) -> list[Row]:
                 directions,
                 config.tracking.border,
             )
+            truth = torch.from_numpy(frame.pose_gt).float()
+            points, _ = sdf_points(view, max(levels), torch.Generator().manual_seed(0))
+            at_truth = linearise(field, points, truth, tracker.config)
+            smallest.append(float(normalised_information(at_truth)[0][0]))
             start = torch.from_numpy(previous.pose_gt).float()
             begin = time.perf_counter()
             result = tracker.track(field, view, start, torch.Generator().manual_seed(frame.index))
             seconds.append(time.perf_counter() - begin)
-            translation, _ = pose_distance(result.pose, torch.from_numpy(frame.pose_gt).float())
+            translation, _ = pose_distance(result.pose, truth)
             errors.append(1000.0 * float(translation))
             assert result.quality is not None
             iterations.append(result.quality.iterations)
@@ -85,6 +94,8 @@ def measure(args: argparse.Namespace) -> list[Row]:
                 max(seconds),
                 statistics.mean(errors),
                 statistics.mean(iterations),
+                min(smallest),
+                statistics.median(smallest),
             )
         )
         print(rows[-1], flush=True)
@@ -93,13 +104,15 @@ def measure(args: argparse.Namespace) -> list[Row]:
 
 def table(rows: list[Row]) -> str:
     lines = [
-        "| levels (points) | median (s/frame) | max (s/frame) | mean error (mm) | iterations |",
-        "|---|---:|---:|---:|---:|",
+        "| levels (points) | median (s/frame) | max (s/frame) | mean error (mm) | iterations "
+        "| smallest information (min / median) |",
+        "|---|---:|---:|---:|---:|---:|",
     ]
     for row in rows:
         lines.append(
             f"| {', '.join(map(str, row.levels))} | {row.median_s:.3f} | {row.max_s:.3f} "
-            f"| {row.error_mm:.2f} | {row.iterations:.1f} |"
+            f"| {row.error_mm:.2f} | {row.iterations:.1f} "
+            f"| {row.information_min:.3f} / {row.information_median:.3f} |"
         )
     return "\n".join(lines) + "\n"
 

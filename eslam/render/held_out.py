@@ -130,10 +130,8 @@ def held_out_errors(
 
     The depth is that of the map's surface, not a volume-rendered one: ESLAM's density
     is not zero in free space nor symmetric about the surface, so rendered depth is
-    biased (rendered without measured depth it comes out short by an amount growing with
-    the samples, -3 to -15 cm at 32 to 256 samples for one field of the demo scene; with
-    the depth-guided samples about 1.4 cm even for an exact TSDF), which hides the
-    differences between maps.
+    biased (rendered without measured depth it comes out short, the more so the more
+    samples a ray takes), and the bias hides the differences between maps.
 
     Raises:
         ValueError: a frame lacks a ground-truth pose, or no pixel is left to score.

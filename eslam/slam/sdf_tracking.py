@@ -144,6 +144,27 @@ def cross_matrix(vector: torch.Tensor) -> torch.Tensor:
     )
 
 
+def centred_tangent(centre: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """(A, A^-1) with xi_c = A xi: the tangent centred on ``centre`` c, where a point moves
+    by v_c + omega x (p - c), v_c = v + omega x c; A = [[I, -[c]_x], [0, I]] (float64)."""
+    identity = torch.eye(6, dtype=torch.float64, device=centre.device)
+    to_centred, from_centred = identity.clone(), identity.clone()
+    to_centred[:3, 3:] = -cross_matrix(centre)
+    from_centred[:3, 3:] = cross_matrix(centre)
+    return to_centred, from_centred
+
+
+def normalised_information(system: Linearisation) -> tuple[torch.Tensor, torch.Tensor]:
+    """Eigenvalues (ascending) and eigenvectors of the information per point,
+    H_c / sum_i w_i with H_c = A^-T H A^-1 in the centred tangent (:func:`centred_tangent`),
+    so translations and rotations do not mix through the world origin. About 1 along a
+    direction every point's normal sees; rotations count with their lever arm (metres)."""
+    _, from_centred = centred_tangent(system.centre)
+    information = from_centred.T @ system.hessian @ from_centred
+    information = information / system.weight.double().sum().clamp_min(1e-12)
+    return torch.linalg.eigh(information)
+
+
 def constrained_directions(system: Linearisation, threshold: float) -> tuple[torch.Tensor, int]:
     """Projector onto the pose directions the points constrain, and how many are not.
 
@@ -152,15 +173,8 @@ def constrained_directions(system: Linearisation, threshold: float) -> tuple[tor
     matrix whose eigenvalue is small is a direction the data cannot see (sliding along a
     plane or a corridor; turning about a cylinder's axis), and a step along it only
     follows noise, so the step is projected onto the well-constrained eigenvectors and the
-    guess is kept along the others.
-
-    The eigen-analysis uses a tangent centred on the points' weighted centroid c, so that
-    its translation and rotation parts do not mix through the world origin: a point moves
-    by v_c + omega x (p - c) with v_c = v + omega x c, i.e. xi_c = A xi with
-    A = [[I, -[c]_x], [0, I]], and H_c = A^-T H A^-1. H_c is divided by the sum of the
-    weights (per-point information: about 1 along a direction every point's normal sees,
-    rotations in metres of lever) and eigenvalues below ``threshold`` are degenerate. The
-    projector in the solver's tangent is A^-1 P_c A.
+    guess is kept along the others. Eigenvalues of :func:`normalised_information` below
+    ``threshold`` are degenerate; the projector in the solver's tangent is A^-1 P_c A.
 
     Returns:
         (6, 6) float64 projector (the identity when nothing is degenerate or
@@ -169,17 +183,12 @@ def constrained_directions(system: Linearisation, threshold: float) -> tuple[tor
     identity = torch.eye(6, dtype=torch.float64, device=system.hessian.device)
     if threshold <= 0:
         return identity, 0
-    to_centred = identity.clone()
-    to_centred[:3, 3:] = -cross_matrix(system.centre)
-    from_centred = identity.clone()
-    from_centred[:3, 3:] = cross_matrix(system.centre)
-    information = from_centred.T @ system.hessian @ from_centred
-    information = information / system.weight.double().sum().clamp_min(1e-12)
-    eigenvalues, eigenvectors = torch.linalg.eigh(information)
+    eigenvalues, eigenvectors = normalised_information(system)
     kept = eigenvectors[:, eigenvalues >= threshold]
     degenerate = 6 - kept.shape[1]
     if degenerate == 0:
         return identity, 0
+    to_centred, from_centred = centred_tangent(system.centre)
     return from_centred @ (kept @ kept.T) @ to_centred, degenerate
 
 
