@@ -164,6 +164,8 @@ def _command_run(args: argparse.Namespace) -> int:
     for option in ("start", "stride", "max_frames"):
         if getattr(args, option) is not None:
             overrides.append(f"data.{option}={getattr(args, option)}")
+    if args.realtime:
+        overrides.append("data.realtime=true")
     config = load_config(args.config, overrides)
     out = Path(args.out) if args.out else Path(default_run_name(args.config))
     _process_settings(config)
@@ -492,6 +494,12 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--stride", type=int, help="use every N-th frame (sets data.stride)")
     run.add_argument("--max-frames", type=int, help="use at most N frames (sets data.max_frames)")
     run.add_argument("--overwrite", action="store_true", help="reuse an existing run folder")
+    run.add_argument(
+        "--realtime",
+        action="store_true",
+        help="drop frames that arrive while busy, keep the newest; replay a recording at its "
+        "recorded rate (sets data.realtime; always on for a live camera; docs/realtime.md)",
+    )
     run.set_defaults(handler=_command_run)
 
     configs = commands.add_parser(

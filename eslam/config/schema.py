@@ -51,6 +51,16 @@ class DataConfig:
     (ScanNet 10, TUM 8, others 0). Intrinsics follow."""
     camera: str | None = None
     """TUM only: fr1, fr2 or fr3 (intrinsics and distortion); null = from the folder name."""
+    prefetch: int = 4
+    """Frames read ahead on a background thread while the loop works (the same frames in
+    the same order: results do not change); 0 = read each frame when the loop asks."""
+    realtime: bool = False
+    """Real-time mode (`--realtime`, always on for a live camera): frames that arrive while
+    the system is busy are dropped, keeping the newest; a recording is replayed at its
+    recorded rate. Such a run cannot be resumed (docs/realtime.md)."""
+    replay_fps: float | None = None
+    """Real-time replay of a recording: release frames at this rate; null = at their
+    timestamps (needed when the timestamps are frame numbers, e.g. Replica folders)."""
 
     def __post_init__(self) -> None:
         if self.start < 0:
@@ -65,6 +75,10 @@ class DataConfig:
             raise ValueError(f"resize must be [width, height] or null, got {self.resize}")
         if self.crop is not None and self.crop < 0:
             raise ValueError(f"crop must be >= 0 or null, got {self.crop}")
+        if self.prefetch < 0:
+            raise ValueError(f"prefetch must be >= 0 frames (0 = off), got {self.prefetch}")
+        if self.replay_fps is not None and not self.replay_fps > 0:
+            raise ValueError(f"replay_fps must be > 0 or null, got {self.replay_fps}")
 
 
 @dataclass
@@ -363,6 +377,11 @@ class MappingConfig:
     """Refine keyframe poses with the map (paper's BA); off is ablation h."""
     keyframe_device: str | None = None
     """Device holding keyframe images (uint8 colour, 16-bit depth); null = the run's device."""
+    view_cache_mb: float = 1024.0
+    """Memory (MB, on the run's device) for keyframes' mapping views (float colour, depth
+    and sampling table: 24 bytes a pixel, 20 MB at 1200x680), built once per keyframe
+    instead of at every mapping call; the least recently used leave when it is full.
+    0 = build them at every call (same results)."""
     weights: LossWeights = field(default_factory=LossWeights)
     """Loss weights while mapping (paper: 5, 200, 10, 0.1, 5)."""
 
@@ -372,6 +391,8 @@ class MappingConfig:
         _at_least(self, "rays", 1)
         _at_least(self, "iterations", 0)
         _at_least(self, "first_iterations", 0)
+        if self.view_cache_mb < 0:
+            raise ValueError(f"view_cache_mb must be >= 0 (0 = off), got {self.view_cache_mb}")
         if self.first_rays is not None and self.first_rays < 1:
             raise ValueError(f"first_rays must be >= 1 or null, got {self.first_rays}")
         if not 0.0 < self.first_lr_decay <= 1.0:

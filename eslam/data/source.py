@@ -29,6 +29,11 @@ class FrameSource(Protocol):
     Attributes:
         intrinsics: the camera of every frame.
         name: what to call the source in messages (a folder, a device, "stream").
+
+    A live sensor (a camera) also sets ``live = True`` (an optional attribute, read with
+    :func:`eslam.data.feed.is_live`): its runs are real time (frames it delivers while the
+    system is busy are dropped) and cannot be resumed. Recordings have no such attribute
+    or set it False.
     """
 
     intrinsics: Intrinsics
@@ -91,11 +96,19 @@ class IterableSource:
         intrinsics: the camera of every frame.
         frames: the frames, in order (consumed once).
         name: what to call the source in messages.
+        live: the frames come from a live sensor (see :class:`FrameSource`).
     """
 
-    def __init__(self, intrinsics: Intrinsics, frames: Iterable[Frame], name: str = "stream"):
+    def __init__(
+        self,
+        intrinsics: Intrinsics,
+        frames: Iterable[Frame],
+        name: str = "stream",
+        live: bool = False,
+    ):
         self.intrinsics = intrinsics
         self.name = name
+        self.live = live
         self._frames = frames
 
     def __iter__(self) -> Iterator[Frame]:

@@ -32,6 +32,10 @@ from eslam.config import ESLAMConfig
 from eslam.config.device import resolve_device
 from eslam.data import RGBDSequence, open_sequence
 from eslam.data.depth_units import DepthCheck, sequence_depth_file, sequence_depth_scale
+from eslam.data.feed import is_live, open_feed, runs_in_real_time
+from eslam.data.prefetch import close_iterator
+from eslam.data.realtime import replay_pace_error, timestamps_are_frame_numbers
+from eslam.data.selection import sequence_timestamps
 from eslam.data.source import FrameSource, SequenceSource, source_length
 from eslam.errors import ConfigError, ESLAMError, InputError, RunInterrupted
 from eslam.field.scene_field import SceneField
@@ -43,6 +47,7 @@ from eslam.slam.bounds_policy import (
     cover_keyframe,
     first_pose,
 )
+from eslam.slam.keyframe_views import KeyframeViews
 from eslam.slam.keyframes import KeyframeSchedule
 from eslam.slam.mapping import MappingSettings, map_window, mapping_schedule
 from eslam.slam.observers import (
@@ -73,6 +78,7 @@ from eslam.slam.state import (
     quality_row,
 )
 from eslam.slam.stops import interrupted_early, save_on_failure, stopped_error
+from eslam.slam.stream_report import StreamLog
 from eslam.slam.trackers import make_tracker, predict_pose
 from eslam.slam.tracking import TrackingQuality
 from eslam.slam.views import make_view
@@ -108,6 +114,9 @@ class RunLoop:
         observers: told about every frame and mapping call.
         source: the input's name, for messages.
         logger: the run's log (warnings about frames, bound estimates and growth).
+        end_on_interrupt: Ctrl-C (or SIGTERM) ends the stream as its end would: the frame
+            in progress is rolled back, the last frame mapped, the run finished (a live
+            or real-time run has no other way to end).
     """
 
     def __init__(
@@ -118,6 +127,7 @@ class RunLoop:
         observers: RunObserver,
         source: str,
         logger: logging.Logger = log,
+        end_on_interrupt: bool = False,
     ) -> None:
         self.config = config
         self.state = state
@@ -129,6 +139,10 @@ class RunLoop:
         self.schedule = KeyframeSchedule(config.mapping.every)
         self.mapping = MappingSettings(config.mapping, config.render, config.loss)
         self.directions = camera_directions(state.keyframes.intrinsics, device)
+        self.views = KeyframeViews(
+            state.keyframes, self.directions, device, config.mapping.view_cache_mb
+        )
+        self.end_on_interrupt = end_on_interrupt
         self.last_frame: Frame | None = None
         self._frames_without_depth = 0
         self._total: int | None = None
@@ -144,13 +158,15 @@ class RunLoop:
         """Process ``frames`` (``total`` of them in the whole run, None if unknown) until
         they end or ``stop_after`` frames are done; map the last frame at the end.
 
-        On any error the frame in progress is rolled back before the error propagates.
+        On any error the frame in progress is rolled back before the error propagates;
+        Ctrl-C with ``end_on_interrupt`` ends the stream instead (class doc).
         """
         state = self.state
         self._total = total
         began = time.perf_counter()
         iterator: Iterator[Frame] = iter(frames)
         complete = True
+        interrupted = False
         while True:
             if stop_after is not None and state.next_frame >= stop_after:
                 complete = total is not None and state.next_frame >= total
@@ -162,10 +178,20 @@ class RunLoop:
                 if frame is None:
                     break
                 done = self.process(frame)
-            except BaseException:
+            except BaseException as error:
                 self._rollback(mark)
-                raise
-            self.observers.on_frame(done)  # the frame is complete: never rolled back
+                if not (self.end_on_interrupt and isinstance(error, KeyboardInterrupt)):
+                    raise
+                interrupted = True
+                break
+            try:
+                self.observers.on_frame(done)  # the frame is complete: never rolled back
+            except KeyboardInterrupt:
+                if not self.end_on_interrupt:
+                    raise
+                interrupted = True
+                break
+        close_iterator(iterator)  # a reader thread stops taking frames it cannot process
         if complete:
             mark = state.mark()
             self._before_mapping = None
@@ -175,7 +201,10 @@ class RunLoop:
                 self._rollback(mark)
                 raise
         return RunEnd(
-            complete=complete, frames=state.next_frame, wall_s=time.perf_counter() - began
+            complete=complete,
+            frames=state.next_frame,
+            wall_s=time.perf_counter() - began,
+            interrupted=interrupted,
         )
 
     def _rollback(self, mark: FrameMark) -> None:
@@ -187,6 +216,7 @@ class RunLoop:
             field_before = SceneField.from_state(self.config.field, field_state).to(self.device)
             self.state.trajectory.set_poses(list(range(len(poses))), poses)
         self.state.rollback(mark, field_before)
+        self.views.forget_from(mark.keyframes)
 
     def process(self, frame: Frame) -> FrameDone:
         """Track ``frame``, map it if it is a keyframe; return what happened."""
@@ -291,10 +321,7 @@ class RunLoop:
             self.log,
         )
         window = state.window.select(store, current, state.generator)
-        views = [
-            make_view(store.rgb(k, self.device), store.depth(k, self.device), self.directions)
-            for k in window
-        ]
+        views = self.views.views(window)
         frame_of = store.frame_indices
         oldest = min(window, key=lambda k: frame_of[k])
         optimise = [self.config.mapping.optimise_poses and k != oldest for k in window]
@@ -423,7 +450,27 @@ def _open_input(
             sequence_depth_scale(sequence), bound=None, enabled=config.data.depth_check
         ),
     )
+    if (
+        config.data.realtime
+        and config.data.replay_fps is None
+        and timestamps_are_frame_numbers(sequence_timestamps(sequence))
+    ):
+        raise replay_pace_error(str(sequence.root))
     return None, sequence
+
+
+def check_resumable(config: ESLAMConfig, source: FrameSource | None, run_dir: Path) -> None:
+    """Refuse to resume a real-time run: which frames it processed depended on timing (the
+    rest were dropped), so no frame "follows its checkpoint" (docs/realtime.md).
+
+    Raises:
+        ConfigError: the run in ``run_dir`` ran in real time, or ``source`` is live.
+    """
+    if config.data.realtime or is_live(source):
+        raise ConfigError(
+            f"{run_dir} ran in real time (frames were dropped as they arrived), so it cannot "
+            "be resumed: start a new run (its trajectory, map and mesh stay where they are)"
+        )
 
 
 def run_slam(
@@ -469,6 +516,8 @@ def run_slam(
     """
     device = resolve_device(config.device)
     config = absolute_data_path(config)
+    if resume:
+        check_resumable(config, source, Path(run_dir))
     source, sequence = _open_input(config, source)
     intrinsics = source.intrinsics if source is not None else sequence.intrinsics  # type: ignore[union-attr]
     folder = open_run_folder(run_dir, config, sequence, resume, overwrite)
@@ -483,26 +532,32 @@ def run_slam(
                 if resume:
                     run_logger.info("no frame was saved before: the run starts at frame 0")
                 state = initial_state(config, intrinsics, device)
+            if sequence is not None:
+                source = SequenceSource(sequence, start=state.next_frame)
+            assert source is not None
+            feed = open_feed(source, config.data, source.name)
             memory = PeakMemory(device)
-            writer = RunWriter(run, config, memory)
+            writer = RunWriter(run, config, memory, feed.stream)
             writer.saved_frames = state.next_frame
-            progress = ProgressObserver(config.output.progress)
+            progress = ProgressObserver(config.output.progress, stream=feed.stream)
+            reports = [] if feed.stream is None else [StreamLog(feed.stream, run_logger)]
             try:
-                if sequence is not None:
-                    source = SequenceSource(sequence, start=state.next_frame)
-                assert source is not None
                 remaining = source_length(source)
                 total = None if remaining is None else state.next_frame + remaining
                 memory.start()
-                everyone = Observers([writer, LogObserver(run_logger), progress, *observers])
-                loop = RunLoop(config, state, device, everyone, source.name, run_logger)
+                everyone = Observers(
+                    [writer, LogObserver(run_logger), progress, *reports, *observers]
+                )
+                real_time = runs_in_real_time(source, config.data)
+                loop = RunLoop(config, state, device, everyone, source.name, run_logger, real_time)
                 if resume and not state.last_mapped and isinstance(source, SequenceSource):
                     loop.last_frame = source.frame(state.next_frame - 1)
                 try:  # a failure while starting or finishing (the mesh) is a failure too
                     everyone.on_start(
                         RunStart(config, run.root, state, device, source.name, remaining, resume)
                     )
-                    end = loop.run(source, total, stop_after)
+                    with feed:
+                        end = loop.run(feed.frames, total, stop_after)
                     everyone.on_finish(end)
                 except BaseException as error:
                     save_on_failure(everyone, error, state.next_frame, run_logger)

@@ -120,11 +120,13 @@ class RunEnd:
             ``stop_after`` frames.
         frames: frames processed in all (including before a resume).
         wall_s: wall time of this process's part of the run, seconds.
+        interrupted: Ctrl-C ended a live or real-time stream (it then counts as complete).
     """
 
     complete: bool
     frames: int
     wall_s: float
+    interrupted: bool = False
 
 
 class RunObserver(Protocol):
@@ -243,7 +245,8 @@ class LogObserver(RunObserverBase):
 
     def on_finish(self, end: RunEnd) -> None:
         state = "finished" if end.complete else "stopped"
-        self.log.info("run %s after %d frames (%.1f s)", state, end.frames, end.wall_s)
+        how = " (the stream was ended by Ctrl-C)" if end.interrupted else ""
+        self.log.info("run %s after %d frames (%.1f s)%s", state, end.frames, end.wall_s, how)
 
     def on_failure(self, error: BaseException, frames: int) -> None:
         self.log.error("run stopped after %d completed frames: %s", frames, _describe(error))

@@ -15,6 +15,7 @@ from typing import TextIO
 
 import numpy as np
 
+from eslam.data.realtime import LatestFrameReader
 from eslam.evaluate.trajectory import absolute_trajectory_error
 from eslam.slam.observers import FrameDone, MappingStep, RunEnd, RunObserverBase, RunStart
 
@@ -33,16 +34,25 @@ def finite_ate_pairs(estimated: np.ndarray, gt: np.ndarray) -> np.ndarray:
 
 class ProgressObserver(RunObserverBase):
     """A tqdm bar over the frames (total unknown for a live stream) and one over the first
-    mapping call's iterations; does nothing when off (module doc).
+    mapping call's iterations; does nothing when off, not even reading the device
+    (module doc). A real-time run's bar also shows the frames dropped so far.
 
     Args:
         enabled: draw the bars.
         file: where to draw them (default: stderr, looked up when the run starts).
+        stream: the real-time reader of a real-time run.
     """
 
-    def __init__(self, enabled: bool, file: TextIO | None = None) -> None:
+    def __init__(
+        self,
+        enabled: bool,
+        file: TextIO | None = None,
+        stream: LatestFrameReader | None = None,
+    ) -> None:
         self.enabled = enabled
         self.file = file
+        self.stream = stream
+        self.postfix: dict[str, str] = {}
         self.bar = None
         self.mapping_bar = None
         self.state = None
@@ -54,7 +64,9 @@ class ProgressObserver(RunObserverBase):
         from tqdm import tqdm
 
         done = start.state.next_frame
-        total = None if start.frames is None else done + start.frames
+        # real time: how many frames will be processed (not dropped) is unknown
+        unknown = start.frames is None or self.stream is not None
+        total = None if unknown else done + start.frames
         self.state = start.state
         self.bar = tqdm(total=total, initial=done, unit="frame", file=self._file())
 
@@ -89,17 +101,32 @@ class ProgressObserver(RunObserverBase):
         else:  # the process's first frame: counted, but not in the rate
             restart_clock(self.bar, self.bar.n + 1)
             self._clock_restarted = True
+        postfix = dict(self.postfix)
+        if self.stream is not None:
+            postfix["dropped"] = str(self.stream.counts().replaced)
         index = frame.index
         if index >= 2 and (index + 1) % ATE_EVERY == 0:
-            trajectory = self.state.trajectory
-            gt = trajectory.gt_poses()
-            if gt is None:
-                return
-            estimated = trajectory.poses.detach().cpu().double().numpy()
-            usable = finite_ate_pairs(estimated, gt)
-            if usable.sum() >= 3:
-                ate = absolute_trajectory_error(estimated[usable], gt[usable])
-                self.bar.set_postfix(ate_cm=f"{100 * ate.rmse:.2f}")
+            ate_cm = self._ate_cm()
+            if ate_cm is not None:
+                postfix["ate_cm"] = ate_cm
+        if postfix != self.postfix:
+            self.postfix = postfix
+            self.bar.set_postfix(postfix)
+
+    def _ate_cm(self) -> str | None:
+        """The running ATE, shown in cm; None without ground truth for 3 frames."""
+        if self.state is None:
+            return None
+        trajectory = self.state.trajectory
+        gt = trajectory.gt_poses()
+        if gt is None:
+            return None
+        estimated = trajectory.poses.detach().cpu().double().numpy()
+        usable = finite_ate_pairs(estimated, gt)
+        if usable.sum() < 3:
+            return None
+        ate = absolute_trajectory_error(estimated[usable], gt[usable])
+        return f"{100 * ate.rmse:.2f}"
 
     def _close_mapping(self) -> None:
         if self.mapping_bar is not None:

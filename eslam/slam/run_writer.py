@@ -21,11 +21,14 @@ from __future__ import annotations
 
 import contextlib
 import json
+import time
 from collections.abc import Iterator
+from dataclasses import dataclass
 
 import numpy as np
 
 from eslam.config import ESLAMConfig
+from eslam.data.realtime import LatestFrameReader
 from eslam.errors import OutputError, RunStopped
 from eslam.evaluate.trajectory import absolute_trajectory_error
 from eslam.io.run_dir import RunDirectory, write_json
@@ -34,6 +37,7 @@ from eslam.slam.observers import FrameDone, RunEnd, RunObserverBase, RunStart
 from eslam.slam.progress import finite_ate_pairs
 from eslam.slam.resources import PeakMemory
 from eslam.slam.state import SLAMState, save_state
+from eslam.slam.stream_report import stream_metrics
 
 TRACKING_COLUMNS = (
     "tracking_iterations",
@@ -42,6 +46,46 @@ TRACKING_COLUMNS = (
     "tracking_failed",
 )
 """timings.json's per-frame tracking-quality lists (trackers that judge themselves)."""
+
+
+@dataclass(frozen=True)
+class WallTime:
+    """Wall-clock time of this process's frames.
+
+    Attributes:
+        frames: frames this process processed (since the resume, for a resumed run).
+        wall_s: seconds from the run's start to its last frame (the final mapping call
+            included; the mesh and the final checkpoint not).
+        first_frame_s: seconds of the first of those frames (with the map's first
+            mapping call for a new run), None before it was done.
+    """
+
+    frames: int
+    wall_s: float
+    first_frame_s: float | None
+
+
+def speed_metrics(wall: WallTime, tracking_time: list[float]) -> dict:
+    """metrics.json's speed keys (docs/evaluation.md, "metrics.json").
+
+    - ``fps_wall`` = frames / wall_s: what a user waits for, everything included;
+    - ``fps_wall_after_first`` = (frames - 1) / (wall_s - first_frame_s): the same without
+      the first frame (the first mapping call and warm-up), the steady rate;
+    - ``fps_tracking`` = frames / total tracking time, over all the run's frames:
+      Co-SLAM's definition (mapping and everything else left out), for comparison only.
+    """
+    metrics: dict = {"wall_frames": wall.frames, "wall_s": wall.wall_s}
+    if wall.frames > 0 and wall.wall_s > 0:
+        metrics["fps_wall"] = wall.frames / wall.wall_s
+    if wall.first_frame_s is not None:
+        metrics["first_frame_s"] = wall.first_frame_s
+        steady = wall.wall_s - wall.first_frame_s
+        if wall.frames > 1 and steady > 0:
+            metrics["fps_wall_after_first"] = (wall.frames - 1) / steady
+    tracking = float(np.sum(tracking_time))
+    if tracking > 0:
+        metrics["fps_tracking"] = len(tracking_time) / tracking
+    return metrics
 
 
 def run_metrics(state: SLAMState, device: str, peak_memory_mb: float) -> dict:
@@ -85,6 +129,14 @@ def previous_metrics(run: RunDirectory) -> dict:
 class RunWriter(RunObserverBase):
     """Writes the run folder ``run`` as the run goes (module doc).
 
+    Args:
+        run: the run folder.
+        config: the run's configuration.
+        memory: the peak-memory tracker.
+        stream: the real-time reader of a real-time run (its counts go to metrics.json,
+            the stream position of each processed frame to timings.json).
+        clock: seconds (tests pass their own).
+
     Attributes:
         metrics: metrics.json's contents once the run finished (None before).
         saved_frames: frames in the last map.pt written (what a resume continues from;
@@ -92,21 +144,42 @@ class RunWriter(RunObserverBase):
         resumed_at: frames the run had when this process resumed it (None: a new run).
     """
 
-    def __init__(self, run: RunDirectory, config: ESLAMConfig, memory: PeakMemory) -> None:
+    def __init__(
+        self,
+        run: RunDirectory,
+        config: ESLAMConfig,
+        memory: PeakMemory,
+        stream: LatestFrameReader | None = None,
+        clock=time.perf_counter,
+    ) -> None:
         self.run = run
         self.config = config
         self.memory = memory
+        self.stream = stream
+        self.clock = clock
         self.state: SLAMState | None = None
         self.metrics: dict | None = None
         self.saved_frames = 0
         self.resumed_at: int | None = None
+        self._began = 0.0
+        self._first_done: float | None = None
+        self._last_done = 0.0
 
     def on_start(self, start: RunStart) -> None:
         self.state = start.state
         self.saved_frames = start.state.next_frame
         self.resumed_at = start.state.next_frame if start.resumed else None
+        self._began = self._last_done = self.clock()
+
+    def _wall_time(self, frames: int) -> WallTime:
+        """This process's wall time up to now, over its ``frames`` frames."""
+        first = None if self._first_done is None else self._first_done - self._began
+        return WallTime(frames, self._last_done - self._began, first)
 
     def on_frame(self, frame: FrameDone) -> None:
+        self._last_done = self.clock()
+        if self._first_done is None:
+            self._first_done = self._last_done
         # before the first frame with depth nothing is learnt: a resume must start at 0
         if len(self._state().keyframes) == 0:
             return
@@ -115,6 +188,7 @@ class RunWriter(RunObserverBase):
                 self.checkpoint()
 
     def on_finish(self, end: RunEnd) -> None:
+        self._last_done = self.clock()  # after the final mapping call
         state = self._state()
         with self._stop_on_failed_checkpoint():
             self.checkpoint()
@@ -138,6 +212,13 @@ class RunWriter(RunObserverBase):
         """Write metrics.json (merged with the earlier one when no frame was added since
         the resume: module doc); return what was written."""
         metrics = run_metrics(state, str(self.memory.device), self.memory.peak_mb())
+        frames = state.next_frame - (self.resumed_at or 0)
+        speed = speed_metrics(self._wall_time(frames), state.tracking_time)
+        if frames == 0:  # a finished run resumed again: its wall-clock keys stay
+            speed = {k: v for k, v in speed.items() if k == "fps_tracking"}
+        metrics.update(speed)
+        if self.stream is not None:
+            metrics.update(stream_metrics(self.stream.counts(), frames))
         if self.resumed_at is not None:
             previous = previous_metrics(self.run)
             if state.next_frame == self.resumed_at:
@@ -185,4 +266,6 @@ class RunWriter(RunObserverBase):
         if np.isfinite(quality[:, 3]).any():  # per frame, null where not judged
             for key, column in zip(TRACKING_COLUMNS, quality.T, strict=True):
                 timings[key] = [None if np.isnan(v) else float(v) for v in column]
+        if self.stream is not None:  # no resume: the run's frames are this process's
+            timings["source_index"] = self.stream.source_indices[: state.next_frame]
         write_json(self.run.timings, timings)
