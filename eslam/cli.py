@@ -148,7 +148,7 @@ def _print_metrics(result) -> None:
     print(f"run folder: {result.run_dir}")
     for key, value in result.metrics.items():
         shown = f"{value:.4f}" if isinstance(value, float) else str(value)
-        print(f"  {key:<16} {shown}")
+        print(f"  {key:<20} {shown}")
 
 
 def _command_run(args: argparse.Namespace) -> int:

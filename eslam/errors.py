@@ -158,17 +158,27 @@ class RunStopped(ESLAMError):
         cause: the error that stopped the run (an ESLAMError's message is kept as is).
         frames: frames completed and saved in the run folder.
         run_dir: the run folder.
+        resumable: False for a real-time run (``eslam resume`` refuses it): the message
+            then says to start a new run.
     """
 
-    def __init__(self, cause: BaseException, frames: int, run_dir: str | Path) -> None:
+    def __init__(
+        self, cause: BaseException, frames: int, run_dir: str | Path, resumable: bool = True
+    ) -> None:
         self.cause = cause
         self.frames = frames
         self.run_dir = Path(run_dir)
         reason = str(cause) if isinstance(cause, ESLAMError) else _describe(cause)
-        super().__init__(
-            f"{reason}; {_saved(frames, self.run_dir)} "
-            f"(fix the cause, then continue with `eslam resume {self.run_dir}`)"
+        then = (
+            f"fix the cause, then continue with `eslam resume {self.run_dir}`"
+            if resumable
+            else NOT_RESUMABLE
         )
+        super().__init__(f"{reason}; {_saved(frames, self.run_dir)} ({then})")
+
+
+NOT_RESUMABLE = "a real-time run cannot be resumed: start a new run"
+"""What a stopped real-time run's message says instead of the resume command."""
 
 
 def _saved(frames: int, run_dir: Path) -> str:
@@ -194,9 +204,10 @@ class RunInterrupted(KeyboardInterrupt):
         frames: frames completed and saved in the run folder; None when the run was
             interrupted while resuming, before it changed any saved frame.
         run_dir: the run folder.
+        resumable: False for a real-time run (see :class:`RunStopped`).
     """
 
-    def __init__(self, frames: int | None, run_dir: str | Path) -> None:
+    def __init__(self, frames: int | None, run_dir: str | Path, resumable: bool = True) -> None:
         self.frames = frames
         self.run_dir = Path(run_dir)
         if frames is None:
@@ -205,4 +216,5 @@ class RunInterrupted(KeyboardInterrupt):
             done = "before the first frame was complete"
         else:
             done = f"after {frames} frames, saved in {self.run_dir}"
-        super().__init__(f"interrupted {done} (continue with `eslam resume {self.run_dir}`)")
+        then = f"continue with `eslam resume {self.run_dir}`" if resumable else NOT_RESUMABLE
+        super().__init__(f"interrupted {done} ({then})")

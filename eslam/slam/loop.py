@@ -536,6 +536,7 @@ def run_slam(
                 source = SequenceSource(sequence, start=state.next_frame)
             assert source is not None
             feed = open_feed(source, config.data, source.name)
+            real_time = runs_in_real_time(source, config.data)
             memory = PeakMemory(device)
             writer = RunWriter(run, config, memory, feed.stream)
             writer.saved_frames = state.next_frame
@@ -548,7 +549,6 @@ def run_slam(
                 everyone = Observers(
                     [writer, LogObserver(run_logger), progress, *reports, *observers]
                 )
-                real_time = runs_in_real_time(source, config.data)
                 loop = RunLoop(config, state, device, everyone, source.name, run_logger, real_time)
                 if resume and not state.last_mapped and isinstance(source, SequenceSource):
                     loop.last_frame = source.frame(state.next_frame - 1)
@@ -563,7 +563,7 @@ def run_slam(
                     save_on_failure(everyone, error, state.next_frame, run_logger)
                     raise
             except BaseException as error:
-                stopped = stopped_error(error, writer.saved_frames, run.root)
+                stopped = stopped_error(error, writer.saved_frames, run.root, not real_time)
                 if stopped is error:
                     raise
                 raise stopped from error

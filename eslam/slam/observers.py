@@ -245,7 +245,7 @@ class LogObserver(RunObserverBase):
 
     def on_finish(self, end: RunEnd) -> None:
         state = "finished" if end.complete else "stopped"
-        how = " (the stream was ended by Ctrl-C)" if end.interrupted else ""
+        how = " (the stream was ended by Ctrl-C or SIGTERM)" if end.interrupted else ""
         self.log.info("run %s after %d frames (%.1f s)%s", state, end.frames, end.wall_s, how)
 
     def on_failure(self, error: BaseException, frames: int) -> None:

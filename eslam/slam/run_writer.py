@@ -238,7 +238,8 @@ class RunWriter(RunObserverBase):
         except OutputError as error:
             if self.saved_frames == 0:
                 raise
-            raise RunStopped(error, self.saved_frames, self.run.root) from error
+            resumable = self.stream is None  # a real-time run cannot be resumed
+            raise RunStopped(error, self.saved_frames, self.run.root, resumable) from error
 
     def _state(self) -> SLAMState:
         if self.state is None:

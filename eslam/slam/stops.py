@@ -30,8 +30,11 @@ def save_on_failure(
         logger.error("could not save the completed frames: %s: %s", type(nested).__name__, nested)
 
 
-def stopped_error(error: BaseException, frames: int, run_dir: Path) -> BaseException:
-    """What to raise for ``error`` once ``frames`` frames are saved in ``run_dir``.
+def stopped_error(
+    error: BaseException, frames: int, run_dir: Path, resumable: bool = True
+) -> BaseException:
+    """What to raise for ``error`` once ``frames`` frames are saved in ``run_dir``
+    (``resumable`` False: a real-time run, whose message says to start a new run).
 
     Every stop a user can cause (Ctrl-C, SIGTERM, bad input, a full disk, out of memory)
     becomes an error naming ``eslam resume RUN``, even before the first frame was
@@ -41,14 +44,14 @@ def stopped_error(error: BaseException, frames: int, run_dir: Path) -> BaseExcep
     if isinstance(error, RunStopped | RunInterrupted):
         return error
     if isinstance(error, KeyboardInterrupt):
-        return RunInterrupted(frames, run_dir)
-    resumable = isinstance(error, ESLAMError | OSError | MemoryError | torch.cuda.OutOfMemoryError)
-    if resumable:
-        return RunStopped(error, frames, run_dir)
-    error.add_note(
-        f"eslam: {frames} completed frames are saved in {run_dir} "
-        f"(continue with `eslam resume {run_dir}`)"
+        return RunInterrupted(frames, run_dir, resumable)
+    user_caused = isinstance(
+        error, ESLAMError | OSError | MemoryError | torch.cuda.OutOfMemoryError
     )
+    if user_caused:
+        return RunStopped(error, frames, run_dir, resumable)
+    then = f"continue with `eslam resume {run_dir}`" if resumable else "a real-time run"
+    error.add_note(f"eslam: {frames} completed frames are saved in {run_dir} ({then})")
     return error
 
 

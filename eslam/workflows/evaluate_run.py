@@ -22,7 +22,7 @@ from typing import Literal
 import numpy as np
 
 from eslam.config import ESLAMConfig, load_config
-from eslam.data import RGBDSequence, open_sequence
+from eslam.data import RGBDSequence, open_sequence, sequence_timestamps
 from eslam.errors import ConfigError, InputError
 from eslam.evaluate.depth_l1 import DepthL1Options, depth_l1
 from eslam.evaluate.reconstruction import (
@@ -147,7 +147,9 @@ def evaluate_run(run_dir: str | Path, options: EvaluationOptions) -> dict[str, o
         images += [("Trajectory (top and side views)", TRAJECTORY_PLOT)]
         images += [("Per-frame translation error", ERROR_PLOT)]
     if options.gt_mesh is not None:
-        metrics.update(_reconstruction(run, config, estimated, options, (settings, progress)))
+        metrics.update(
+            _reconstruction(run, config, (timestamps, estimated), options, (settings, progress))
+        )
     write_json(run.metrics, metrics)
     title = options.title or report_title(run.root)
     write_report(run.root / "report.md", title, metrics, settings, images)
@@ -188,29 +190,47 @@ def _trajectory_error(
     return ate
 
 
+def sequence_frames(
+    timestamps: np.ndarray, sequence: RGBDSequence
+) -> tuple[np.ndarray, np.ndarray]:
+    """Rows of a run's trajectory and the frames of ``sequence`` they estimate, matched by
+    timestamp: frame i is row i for a run that took every frame, but a real-time run
+    processed only some (the others were dropped).
+
+    Returns:
+        (M,) row indices and (M,) sequence frame indices, in trajectory order.
+    """
+    return associate_timestamps(timestamps, sequence_timestamps(sequence), 1e-6)
+
+
 def _reconstruction(
     run: RunDirectory,
     config: ESLAMConfig,
-    estimated: np.ndarray,
+    trajectory: tuple[np.ndarray, np.ndarray],
     options: EvaluationOptions,
     notes: tuple[list[str], StageProgress],
 ) -> dict[str, object]:
-    """The mesh metrics; appends how they were measured to ``notes``' settings and shows
-    each stage on ``notes``' progress."""
+    """The mesh metrics of the run whose ``trajectory`` is (timestamps, poses); appends how
+    they were measured to ``notes``' settings and shows each stage on ``notes``' progress."""
     settings, progress = notes
     if not run.mesh.is_file():
         raise InputError(run.mesh, "not found", f"extract it with `eslam mesh {run.root}`")
     reconstruction = read_mesh_ply(run.mesh)
     ground_truth = read_mesh(options.gt_mesh)
     sequence = _run_sequence(run, config, options.data)
-    frames = np.arange(0, min(len(sequence), len(estimated)), options.cull_every)
+    rows, frames = sequence_frames(trajectory[0], sequence)
+    rows, frames = rows[:: options.cull_every], frames[:: options.cull_every]
     cull = CullOptions(config.field.truncation, options.max_edge, options.device)
     gt_poses = sequence.gt_poses()
     if gt_poses is None:
         raise InputError(
             sequence.root, "has no ground-truth poses to cull the GT mesh with", "use --protocol"
         )
-    culls = (("cull mesh.ply", estimated, reconstruction), ("cull GT mesh", gt_poses, ground_truth))
+    estimated = trajectory[1][rows]
+    culls = (
+        ("cull mesh.ply", estimated, reconstruction),
+        ("cull GT mesh", gt_poses[frames], ground_truth),
+    )
     culled = []
     for name, poses, mesh in culls:
         with progress.stage(name, len(frames), "frame") as advance:
@@ -272,10 +292,12 @@ def _culled(
     frames: np.ndarray,
     request: CullRequest,
 ) -> TriangleMesh:
-    usable = frames[np.isfinite(poses[frames]).all(axis=(1, 2))]
+    """``mesh`` culled by the cameras ``poses`` (F, 4, 4) of the sequence's ``frames`` (F,)."""
+    finite = np.isfinite(poses).all(axis=(1, 2))
+    usable = frames[finite]
     protocol = request.options.protocol
     depths = _depths(sequence, usable, request.advance) if protocol == "eslam" else None
-    cameras = CullCameras(poses[usable], sequence.intrinsics, depths)
+    cameras = CullCameras(poses[finite], sequence.intrinsics, depths)
     culled = cull_mesh(mesh, cameras, protocol, request.cull)
     request.advance(len(frames))  # also the frames left out and those without depth read
     return culled

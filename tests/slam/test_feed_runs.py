@@ -15,7 +15,7 @@ import torch
 
 from eslam.data import open_sequence
 from eslam.data.source import IterableSource
-from eslam.errors import ConfigError
+from eslam.errors import ConfigError, InputError
 from eslam.io.trajectory import read_tum_trajectory
 from eslam.render.rays import camera_directions
 from eslam.slam.keyframe_views import KeyframeViews, view_bytes
@@ -24,8 +24,10 @@ from eslam.slam.loop import run_slam
 from eslam.slam.observers import FrameDone, RunObserverBase
 from eslam.slam.progress import ProgressObserver
 from eslam.slam.run_writer import WallTime, speed_metrics
+from eslam.slam.stops import stopped_error
 from eslam.slam.trajectory import Trajectory
 from eslam.slam.views import make_view
+from eslam.workflows.evaluate_run import sequence_frames
 from tests.conftest import tiny_config
 
 QUICK = (
@@ -133,9 +135,14 @@ def test_a_real_time_replay_drops_frames_in_order_and_pairs_the_right_ground_tru
     np.testing.assert_array_equal(times, sequence.timestamps()[processed])
     _, gt = read_tum_trajectory(tmp_path / "rt" / "trajectory_gt.txt")
     np.testing.assert_allclose(gt, sequence.gt_poses()[processed], atol=1e-6)
+    rows, frames = sequence_frames(times, sequence)  # what `eslam eval` culls the meshes with
+    assert rows.tolist() == list(range(len(processed))) and frames.tolist() == processed
     assert "dropped" in (tmp_path / "rt" / "log.txt").read_text()
     with pytest.raises(ConfigError, match=r"real time.*cannot be resumed"):
         run_slam(config, tmp_path / "rt", resume=True)
+    # a real-time run stopped by an error says so instead of naming `eslam resume`
+    stopped = stopped_error(InputError(Path("x.png"), "unreadable", "fix it"), 2, tmp_path, False)
+    assert "start a new run" in str(stopped) and "eslam resume" not in str(stopped)
 
 
 class CtrlC(RunObserverBase):
