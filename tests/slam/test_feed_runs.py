@@ -21,7 +21,7 @@ from eslam.render.rays import camera_directions
 from eslam.slam.keyframe_views import KeyframeViews, view_bytes
 from eslam.slam.keyframes import KeyframeStore
 from eslam.slam.loop import run_slam
-from eslam.slam.observers import FrameDone, RunObserverBase
+from eslam.slam.observers import FrameDone, MappingStep, RunObserverBase
 from eslam.slam.progress import ProgressObserver
 from eslam.slam.run_writer import WallTime, speed_metrics
 from eslam.slam.stops import stopped_error
@@ -146,13 +146,13 @@ def test_a_real_time_replay_drops_frames_in_order_and_pairs_the_right_ground_tru
 
 
 class CtrlC(RunObserverBase):
-    """Presses Ctrl-C after ``after`` frames."""
+    """Presses Ctrl-C in the middle of mapping frame ``index`` (a keyframe)."""
 
-    def __init__(self, after: int) -> None:
-        self.after = after
+    def __init__(self, index: int) -> None:
+        self.index = index
 
-    def on_frame(self, frame: FrameDone) -> None:
-        if frame.index + 1 == self.after:
+    def on_mapping_step(self, step: MappingStep) -> None:
+        if step.index == self.index and step.done == 1:
             raise KeyboardInterrupt
 
 
@@ -172,6 +172,7 @@ def test_ctrl_c_ends_a_live_run_cleanly(tiny_sequence: Path, tmp_path: Path) -> 
             closed.set()
 
     camera_source = IterableSource(sequence.intrinsics, camera(), name="camera", live=True)
+    # frame 3 (a keyframe: mapping.every=3) is rolled back; frames 0-2 make the run
     result = run_slam(config, tmp_path / "live", source=camera_source, observers=[CtrlC(3)])
     run = tmp_path / "live"
     for name in ("map.pt", "trajectory.txt", "mesh.ply", "metrics.json", "timings.json"):
