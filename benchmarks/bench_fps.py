@@ -19,6 +19,7 @@ Full size takes hours on a 2-core CPU; ``--frames`` and ``--size`` make smoke ru
     python benchmarks/bench_fps.py --device cuda --docs          # 300 frames, 1200x680
     python benchmarks/bench_fps.py --device cpu --frames 5 --size 120x68   # smoke
 
+``--docs`` appends the section to docs/benchmarks.md (``--docs-file`` for another file).
 Trailing ``key=value`` overrides apply after the Replica settings (e.g.
 ``tracking.method=render``). At a smaller ``--size`` the tracking border (75 pixels at
 1200x680) is scaled with the width.
@@ -146,12 +147,9 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     )
     parser.add_argument("--out", type=Path, default=Path("runs/bench_fps"))
     parser.add_argument(
-        "--docs",
-        type=Path,
-        nargs="?",
-        const=DEFAULT_DOCS,
-        help="append the section to this file (docs/benchmarks.md when given bare)",
+        "--docs", action="store_true", help="append the section to --docs-file as well"
     )
+    parser.add_argument("--docs-file", type=Path, default=DEFAULT_DOCS)
     parser.add_argument("--note", default="")
     parser.add_argument("overrides", nargs="*", metavar="key=value", help="config overrides")
     args = parser.parse_args(argv)
@@ -183,7 +181,7 @@ def main(argv: list[str] | None = None) -> None:
     if args.note:
         lines.append(f"- note: {args.note}")
     section = "\n".join([*lines, "", table(result, first_pose_s, args.size)])
-    publish(section, args.docs or DEFAULT_DOCS, print_only=args.docs is None)
+    publish(section, args.docs_file, print_only=not args.docs)
 
 
 if __name__ == "__main__":
