@@ -49,6 +49,10 @@ class DataConfig:
     crop: int | None = None
     """Pixels removed on every border after resizing; null = the layout's default
     (ScanNet 10, TUM 8, others 0). Intrinsics follow."""
+    depth_downsample: int = 1
+    """Keep every k-th depth pixel per side and show it at full size (nearest): depth at
+    1/k resolution, colour and intrinsics unchanged; 8 is the paper's depth / 8 (suppl.
+    Tab. 1; eslam.data.depth_resolution). 1 = the depth as read."""
     camera: str | None = None
     """TUM only: fr1, fr2 or fr3 (intrinsics and distortion); null = from the folder name."""
 
@@ -65,6 +69,7 @@ class DataConfig:
             raise ValueError(f"resize must be [width, height] or null, got {self.resize}")
         if self.crop is not None and self.crop < 0:
             raise ValueError(f"crop must be >= 0 or null, got {self.crop}")
+        _at_least(self, "depth_downsample", 1)
 
 
 @dataclass
