@@ -335,9 +335,11 @@ def _command_sweep(args: argparse.Namespace) -> int:
     sweep = load_sweep(args.sweep)
     only = [name for name in (args.datasets or "").split(",") if name]
     if args.dry_run:
-        print(describe_cells(plan_cells(sweep, args.out, only)))
+        print(describe_cells(plan_cells(sweep, args.out, only, args.overrides)))
         return 0
-    summary = run_sweep(sweep, args.out, args.backend, args.jobs, args.address, only)
+    summary = run_sweep(
+        sweep, args.out, args.backend, args.jobs, args.address, only, extra=args.overrides
+    )
     print(summary.text())
     if summary.count("done") + summary.count("skipped"):
         print(f"tables: eslam table {args.out}")
@@ -366,6 +368,7 @@ def _add_sweep_commands(commands: argparse._SubParsersAction) -> None:
         ),
     )
     sweep.add_argument("sweep", metavar="SWEEP", help="sweep file (YAML)")
+    sweep.add_argument("overrides", nargs="*", metavar="key=value", help="every cell, last")
     sweep.add_argument("--out", required=True, help="output folder (shared by all Ray nodes)")
     sweep.add_argument("--backend", choices=("local", "ray"), default="local", help="(local)")
     sweep.add_argument(

@@ -125,14 +125,17 @@ class SweepSummary:
         return line
 
 
-def plan_cells(sweep: SweepFile, out: str | Path, only: Sequence[str] = ()) -> list[Cell]:
+def plan_cells(
+    sweep: SweepFile, out: str | Path, only: Sequence[str] = (), extra: Sequence[str] = ()
+) -> list[Cell]:
     """Every cell of ``sweep`` (of the datasets named in ``only``, when given), with its
-    resolved configuration, in grid order (dataset, variant, seed).
+    resolved configuration, in grid order (dataset, variant, seed); ``extra`` overrides
+    every cell last (``eslam sweep SWEEP key=value``, e.g. ``device=cuda``).
 
     Override order: ``threads`` (= resources.cpus), ``output.progress=false`` (the sweep
     draws one bar over cells), ``data.path``, the synthetic bound (module
     SYNTHETIC_MARKER), the sweep's overrides, the dataset's, the variant's, the
-    dataset's for the variant (``variant_overrides``), ``seed``.
+    dataset's for the variant (``variant_overrides``), ``extra``, ``seed``.
 
     Raises:
         ConfigError: an unknown dataset in ``only``, a missing config, an invalid
@@ -157,7 +160,7 @@ def plan_cells(sweep: SweepFile, out: str | Path, only: Sequence[str] = ()) -> l
         )
         for variant in sweep.variants:
             for seed in sweep.seeds:
-                config = _cell_config(sweep, dataset, variant, data, seed)
+                config = _cell_config(sweep, (dataset, variant), data, seed, extra)
                 if gt_mesh is not None and not config.output.mesh:
                     raise ConfigError(
                         f"{sweep.path}: dataset {dataset.name!r} has a gt_mesh but variant "
@@ -202,8 +205,13 @@ def _config_file(sweep: SweepFile, text: str, key: str) -> Path:
 
 
 def _cell_config(
-    sweep: SweepFile, dataset: SweepDataset, variant: SweepVariant, data: Path, seed: int
+    sweep: SweepFile,
+    where: tuple[SweepDataset, SweepVariant],
+    data: Path,
+    seed: int,
+    extra: Sequence[str],
 ) -> ESLAMConfig:
+    dataset, variant = where
     key = "base" if dataset.config is None else f"{dataset.name}.config"
     config_file = _config_file(sweep, dataset.config or sweep.base, key)
     bound = []
@@ -218,6 +226,7 @@ def _cell_config(
         *dataset.overrides,
         *variant.overrides,
         *dataset.overrides_of(variant.name),
+        *extra,
         f"seed={seed}",
     ]
     try:
@@ -359,6 +368,7 @@ def run_sweep(
     address: str | None = None,
     only: Sequence[str] = (),
     progress: bool = True,
+    extra: Sequence[str] = (),
 ) -> SweepSummary:
     """Run every cell of ``sweep`` into ``out`` (module docstring).
 
@@ -372,6 +382,7 @@ def run_sweep(
             a local one (or uses the one this process already initialised).
         only: dataset names to run (default: all).
         progress: a bar over cells on stderr.
+        extra: ``key=value`` overrides of every cell, applied last (before the seed).
 
     Raises:
         ConfigError, InputError: a bad sweep file or missing input, before any cell runs.
@@ -382,7 +393,7 @@ def run_sweep(
     if jobs < 1:
         raise ConfigError(f"--jobs must be >= 1, got {jobs}")
     out = Path(out)
-    cells = plan_cells(sweep, out, only)
+    cells = plan_cells(sweep, out, only, extra)
     check_inputs(cells)
     out.mkdir(parents=True, exist_ok=True)
     write_json(out / SWEEP_FILE, _grid(sweep, cells))
