@@ -464,17 +464,28 @@ def _run_in_processes(cells: Sequence[Cell], jobs: int, record: Report) -> None:
     context = multiprocessing.get_context("spawn")
     executor = ProcessPoolExecutor(max_workers=jobs, mp_context=context)
     try:
-        running = {executor.submit(_run_cell_in_worker, cell) for cell in cells}
+        running = {executor.submit(_run_cell_in_worker, cell): cell for cell in cells}
         while running:
-            finished, running = wait(running, return_when=FIRST_COMPLETED)
+            finished, _ = wait(running, return_when=FIRST_COMPLETED)
             for future in finished:
-                outcome = future.result()
+                cell = running.pop(future)
+                try:
+                    outcome = future.result()
+                except Exception as error:  # the worker process died (killed, out of memory)
+                    outcome = worker_lost(cell, error)
                 record(outcome)
                 _stop_if_interrupted(outcome)
     except KeyboardInterrupt:
         executor.shutdown(wait=True, cancel_futures=True)  # running cells save their frames
         raise
     executor.shutdown(wait=True)
+
+
+def worker_lost(cell: Cell, error: BaseException) -> CellOutcome:
+    """Record ``cell`` as failed when the process running it died without an outcome."""
+    message = f"the worker process running the cell died ({one_line(error)})"
+    _write_status(cell, "failed", error=message)
+    return CellOutcome(cell.name, "failed", message)
 
 
 def _ray_module():
@@ -494,18 +505,28 @@ def _run_on_ray(
     ray = _ray_module()
     started = not ray.is_initialized()
     if started:
-        ray.init(address=address or "local")
+        try:
+            ray.init(address=address or "local")
+        except (ConnectionError, RuntimeError, ValueError) as error:
+            raise ConfigError(
+                f"--address {address or 'local'}: cannot start or join the Ray cluster "
+                f"({one_line(error)}); see docs/sweeps.md"
+            ) from None
     try:
         _check_cluster(ray.cluster_resources(), sweep)
         resources = sweep.resources
         task = ray.remote(num_cpus=resources.cpus, num_gpus=resources.gpus, max_retries=1)(
             _run_cell_in_worker
         )
-        running = [task.remote(cell) for cell in cells]
+        refs = {task.remote(cell): cell for cell in cells}
+        running = list(refs)
         try:
             while running:
                 finished, running = ray.wait(running, num_returns=1)
-                outcome = ray.get(finished[0])
+                try:
+                    outcome = ray.get(finished[0])
+                except Exception as error:  # the task's worker died after its retry
+                    outcome = worker_lost(refs[finished[0]], error)
                 record(outcome)
                 _stop_if_interrupted(outcome)
         except KeyboardInterrupt:

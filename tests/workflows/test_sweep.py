@@ -22,6 +22,7 @@ from eslam.workflows.sweep import (
     is_finished,
     plan_cells,
     run_sweep,
+    worker_lost,
 )
 from eslam.workflows.sweep_file import load_sweep
 from eslam.workflows.table import TABLE_METRICS, write_table
@@ -284,6 +285,14 @@ def test_paths_expand_variables_relative_to_the_sweep_file(
     assert cells[0].config.data.path == str(tiny_sequence)
     assert cells[0].config.scene.bound is not None  # a synthetic scene's exact bound
     assert cells[0].run_dir == tmp_path / "out" / "t" / "full" / "seed0"
+    extra = plan_cells(load_sweep(path), tmp_path / "out", extra=["mapping.iterations=3"])
+    assert {cell.config.mapping.iterations for cell in extra} == {3}  # eslam sweep key=value
+    # A worker that died (killed, out of memory) leaves its cell recorded as failed.
+    outcome = worker_lost(cells[0], RuntimeError("A process in the process pool was terminated"))
+    recorded = json.loads((cells[0].run_dir / CELL_FILE).read_text())
+    assert outcome.status == recorded["status"] == "failed"
+    assert recorded["error"] == outcome.error and "worker process" in outcome.error
+    assert not is_finished(cells[0])
 
 
 @pytest.mark.parametrize("sweep_file", SHIPPED, ids=lambda path: path.name)
