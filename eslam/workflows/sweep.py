@@ -7,8 +7,9 @@ its run folder ``DIR/<dataset>/<variant>/seed<k>/`` holds the usual run outputs
 report.md) and cell.json, the cell's status::
 
     {"status": "running" | "done" | "failed" | "interrupted", "error": one line or null,
-     "seconds": ..., "dataset": ..., "variant": ..., "seed": ..., "paper_scene": ...,
-     "paper_experiment": ...}
+     "run": "done" once the run finished (its evaluation may still fail), "evaluation":
+     the evaluation settings of a done cell, "seconds": ..., "dataset": ..., "variant":
+     ..., "seed": ..., "paper_scene": ..., "paper_experiment": ...}
 
 Backends: ``local`` runs cells one after another in this process (``jobs`` = 1) or in
 ``jobs`` spawned worker processes; ``ray`` submits each cell as a Ray task asking for
@@ -17,7 +18,8 @@ Each cell's torch thread count is its ``threads`` setting (``resources.cpus`` un
 overridden), set in the process that runs it.
 
 Resuming: a cell whose cell.json says done and whose config.yaml is the cell's
-resolved config is skipped; one whose run stopped part way (same config, a map.pt)
+resolved config is skipped, unless its evaluation settings changed (then only the
+evaluation runs again); one whose run stopped part way (same config, a map.pt)
 continues with ``eslam resume``'s logic; any other is run afresh. A failed cell records
 its one-line error (and the traceback of a bug) in cell.json and the sweep goes on.
 Ctrl-C stops the running cells as ``eslam run`` does (completed frames saved); finished
@@ -28,6 +30,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import json
 import time
 import traceback
 from collections.abc import Callable, Iterator, Sequence
@@ -254,12 +257,23 @@ def check_inputs(cells: Sequence[Cell]) -> None:
 
 
 def is_finished(cell: Cell) -> bool:
-    """True when the cell's folder holds its finished, evaluated run of the same config."""
+    """True when the cell's folder holds its finished run of the same config, evaluated
+    with the same settings."""
+    return _run_finished(cell) and _read_status(cell.run_dir).get("evaluation") == _evaluation(cell)
+
+
+def _run_finished(cell: Cell) -> bool:
+    """True when the cell's run (not necessarily its evaluation) finished with its config."""
     run = RunDirectory(cell.run_dir)
     status = _read_status(cell.run_dir)
-    if status.get("status") != "done" or not run.metrics.is_file():
+    if status.get("run") != "done" or not run.metrics.is_file():
         return False
     return _same_config(run, cell.config)
+
+
+def _evaluation(cell: Cell) -> dict:
+    """The cell's evaluation settings as cell.json records them."""
+    return json.loads(json_text(dataclasses.asdict(cell.evaluation)))
 
 
 def _same_config(run: RunDirectory, config: ESLAMConfig) -> bool:
@@ -272,8 +286,6 @@ def _same_config(run: RunDirectory, config: ESLAMConfig) -> bool:
 
 
 def _read_status(run_dir: Path) -> dict:
-    import json
-
     try:
         status = json.loads((run_dir / CELL_FILE).read_text(encoding="utf-8"))
     except (OSError, ValueError):
@@ -328,23 +340,30 @@ def run_cell(cell: Cell) -> CellOutcome:
         return CellOutcome(cell.name, "skipped")
     started = time.monotonic()
     run = RunDirectory(cell.run_dir)
-    resume = run.map.is_file() and _same_config(run, cell.config)
+    ran = _run_finished(cell)  # only the evaluation settings changed: evaluate again
+    resume = not ran and run.map.is_file() and _same_config(run, cell.config)
     cell.run_dir.mkdir(parents=True, exist_ok=True)
-    _write_status(cell, "running")
+    _write_status(cell, "running", run="done" if ran else None)
     try:
         with cell_threads(cell.config.threads):
-            run_slam(cell.config, cell.run_dir, resume=resume, overwrite=not resume)
+            if not ran:
+                run_slam(cell.config, cell.run_dir, resume=resume, overwrite=not resume)
+                _write_status(cell, "running", run="done")
             evaluate_run(cell.run_dir, cell.evaluation)
     except KeyboardInterrupt:
-        _write_status(cell, "interrupted", seconds=time.monotonic() - started)
+        run_state = _read_status(cell.run_dir).get("run")
+        _write_status(cell, "interrupted", run=run_state, seconds=time.monotonic() - started)
         raise
     except Exception as error:
         seconds = time.monotonic() - started
         trace = None if isinstance(error, ESLAMError) else traceback.format_exc()
-        _write_status(cell, "failed", error=one_line(error), traceback=trace, seconds=seconds)
+        run_state = _read_status(cell.run_dir).get("run")
+        _write_status(
+            cell, "failed", run=run_state, error=one_line(error), traceback=trace, seconds=seconds
+        )
         return CellOutcome(cell.name, "failed", one_line(error), seconds)
     seconds = time.monotonic() - started
-    _write_status(cell, "done", seconds=seconds)
+    _write_status(cell, "done", run="done", evaluation=_evaluation(cell), seconds=seconds)
     return CellOutcome(cell.name, "done", None, seconds)
 
 

@@ -21,6 +21,7 @@ from eslam.workflows.sweep import (
     _run_in_processes,
     is_finished,
     plan_cells,
+    run_cell,
     run_sweep,
     worker_lost,
 )
@@ -154,10 +155,29 @@ def test_resume_skips_finished_cells_and_retries_failed_ones(local_sweep) -> Non
     # A changed config is not the finished run: those cells would run again.
     assert all(is_finished(c) for c in plan_cells(load_sweep(sweep_file), out) if c.variant in GOOD)
     sweep = yaml.safe_load(sweep_file.read_text())
-    sweep["overrides"] = [*CELL_SETTINGS, "mapping.iterations=3"]
     changed = sweep_file.parent / "changed.yaml"
-    changed.write_text(yaml.safe_dump(sweep))
+    changed.write_text(
+        yaml.safe_dump({**sweep, "overrides": [*CELL_SETTINGS, "mapping.iterations=3"]})
+    )
     assert not any(is_finished(cell) for cell in plan_cells(load_sweep(changed), out))
+
+
+def test_changed_evaluation_settings_evaluate_again_without_running(
+    local_sweep, tmp_path: Path
+) -> None:
+    sweep_file, out, _ = local_sweep
+    shutil.copytree(out / "tiny" / "full" / "seed0", tmp_path / "tiny" / "full" / "seed0")
+    sweep = yaml.safe_load(sweep_file.read_text())
+    evaluated = tmp_path / "evaluated.yaml"
+    evaluated.write_text(yaml.safe_dump({**sweep, "evaluation": {"seed": 1}}, sort_keys=False))
+    cell = next(c for c in plan_cells(load_sweep(evaluated), tmp_path) if c.variant == "full")
+    trajectory = cell.run_dir / "trajectory.txt"
+    before = trajectory.stat().st_mtime_ns
+    assert not is_finished(cell)
+    assert run_cell(cell).status == "done"
+    assert trajectory.stat().st_mtime_ns == before  # not run again
+    recorded = json.loads((cell.run_dir / CELL_FILE).read_text())
+    assert recorded["evaluation"]["seed"] == 1 and is_finished(cell)
 
 
 def test_cli_sweep_exit_status_and_table(local_sweep, capsys: pytest.CaptureFixture) -> None:
