@@ -162,8 +162,9 @@ def plan_cells(
             else sweep.resolve(dataset.gt_mesh, "gt_mesh").absolute()
         )
         for variant in sweep.variants:
+            first = _cell_config(sweep, (dataset, variant), data, sweep.seeds[0], extra)
             for seed in sweep.seeds:
-                config = _cell_config(sweep, (dataset, variant), data, seed, extra)
+                config = dataclasses.replace(first, seed=seed)  # seed is the last override
                 if gt_mesh is not None and not config.output.mesh:
                     raise ConfigError(
                         f"{sweep.path}: dataset {dataset.name!r} has a gt_mesh but variant "
