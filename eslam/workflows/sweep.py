@@ -430,13 +430,20 @@ def run_sweep(
             outcomes[outcome.cell] = outcome
             report(outcome)
 
-        if backend == "ray":
-            _run_on_ray(pending, sweep, address, record)
-        elif jobs == 1:
-            for cell in pending:
-                record(run_cell(cell))
-        else:
-            _run_in_processes(pending, jobs, record)
+        try:
+            if backend == "ray":
+                _run_on_ray(pending, sweep, address, record)
+            elif jobs == 1:
+                for cell in pending:
+                    record(run_cell(cell))
+            else:
+                _run_in_processes(pending, jobs, record)
+        except KeyboardInterrupt:
+            finished = sum(o.status in ("done", "skipped") for o in outcomes.values())
+            raise KeyboardInterrupt(
+                f"interrupted: {finished} of {len(cells)} cells finished and kept, running "
+                f"cells saved their frames; run the same eslam sweep command to continue"
+            ) from None
     return SweepSummary(out, tuple(outcomes[cell.name] for cell in cells))
 
 

@@ -180,6 +180,28 @@ def test_changed_evaluation_settings_evaluate_again_without_running(
     assert recorded["evaluation"]["seed"] == 1 and is_finished(cell)
 
 
+def test_ctrl_c_keeps_finished_cells_and_marks_the_running_one(
+    local_sweep, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import eslam.workflows.sweep as sweep_module
+
+    sweep_file, local_out, _ = local_sweep
+    out = tmp_path / "out"
+    shutil.copytree(local_out, out)
+    shutil.rmtree(out / "tiny" / "nopose" / "seed1")
+    kept = {p: p.stat().st_mtime_ns for p in out.glob("tiny/full/seed*/metrics.json")}
+
+    def interrupted(*args: object, **kwargs: object) -> None:
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(sweep_module, "run_slam", interrupted)
+    with pytest.raises(KeyboardInterrupt, match="3 of 6 cells finished and kept"):
+        run_sweep(load_sweep(sweep_file), out, progress=False)
+    status = json.loads((out / "tiny" / "nopose" / "seed1" / CELL_FILE).read_text())
+    assert status["status"] == "interrupted"
+    assert {p: p.stat().st_mtime_ns for p in kept} == kept
+
+
 def test_cli_sweep_exit_status_and_table(local_sweep, capsys: pytest.CaptureFixture) -> None:
     sweep_file, out, _ = local_sweep
     assert main(["sweep", str(sweep_file), "--out", str(out), "--datasets", "tiny"]) == 1
