@@ -329,16 +329,18 @@ def _command_recon(args: argparse.Namespace) -> int:
 
 
 def _command_sweep(args: argparse.Namespace) -> int:
-    from eslam.workflows.sweep import describe_cells, plan_cells, run_sweep
+    from eslam.workflows.sweep import check_inputs, describe_cells, plan_cells, run_sweep
     from eslam.workflows.sweep_file import load_sweep
 
-    sweep = load_sweep(args.sweep)
-    only = [name for name in (args.datasets or "").split(",") if name]
+    names = [[n for n in (text or "").split(",") if n] for text in (args.datasets, args.variants)]
+    sweep = load_sweep(args.sweep).select(*names)
     if args.dry_run:
-        print(describe_cells(plan_cells(sweep, args.out, only, args.overrides)))
+        cells = plan_cells(sweep, args.out, args.overrides)
+        check_inputs(cells)
+        print(describe_cells(cells))
         return 0
     summary = run_sweep(
-        sweep, args.out, args.backend, args.jobs, args.address, only, extra=args.overrides
+        sweep, args.out, args.backend, args.jobs, args.address, extra=args.overrides
     )
     print(summary.text())
     if summary.count("done") + summary.count("skipped"):
@@ -378,7 +380,10 @@ def _add_sweep_commands(commands: argparse._SubParsersAction) -> None:
         "--address", help="ray: cluster to join (auto, HOST:6379); default a new one"
     )
     sweep.add_argument("--datasets", metavar="A,B", help="run only these datasets of SWEEP")
-    sweep.add_argument("--dry-run", action="store_true", help="print the cells, run nothing")
+    sweep.add_argument("--variants", metavar="A,B", help="run only these variants of SWEEP")
+    sweep.add_argument(
+        "--dry-run", action="store_true", help="check the input, print the cells, run nothing"
+    )
     sweep.set_defaults(handler=_command_sweep)
 
     table = commands.add_parser(

@@ -128,12 +128,10 @@ class SweepSummary:
         return line
 
 
-def plan_cells(
-    sweep: SweepFile, out: str | Path, only: Sequence[str] = (), extra: Sequence[str] = ()
-) -> list[Cell]:
-    """Every cell of ``sweep`` (of the datasets named in ``only``, when given), with its
-    resolved configuration, in grid order (dataset, variant, seed); ``extra`` overrides
-    every cell last (``eslam sweep SWEEP key=value``, e.g. ``device=cuda``).
+def plan_cells(sweep: SweepFile, out: str | Path, extra: Sequence[str] = ()) -> list[Cell]:
+    """Every cell of ``sweep`` (``SweepFile.select`` picks datasets and variants), with
+    its resolved configuration, in grid order (dataset, variant, seed); ``extra``
+    overrides every cell last (``eslam sweep SWEEP key=value``, e.g. ``device=cuda``).
 
     Override order: ``threads`` (= resources.cpus), ``output.progress=false`` (the sweep
     draws one bar over cells), ``data.path``, the synthetic bound (module
@@ -141,19 +139,11 @@ def plan_cells(
     dataset's for the variant (``variant_overrides``), ``extra``, ``seed``.
 
     Raises:
-        ConfigError: an unknown dataset in ``only``, a missing config, an invalid
+        ConfigError: a missing config, an invalid
             override or evaluation setting; the message names the sweep file and cell.
     """
-    names = [dataset.name for dataset in sweep.datasets]
-    unknown = [name for name in only if name not in names]
-    if unknown:
-        raise ConfigError(
-            f"{sweep.path}: no dataset named {unknown[0]!r} (it has: {', '.join(names)})"
-        )
     cells = []
     for dataset in sweep.datasets:
-        if only and dataset.name not in only:
-            continue
         evaluation = _evaluation_options(sweep, dataset)
         data = sweep.resolve(dataset.data, f"{dataset.name}.data").absolute()
         gt_mesh = (
@@ -250,7 +240,7 @@ def check_inputs(cells: Sequence[Cell]) -> None:
     for path in dict.fromkeys(Path(str(cell.config.data.path)) for cell in cells):
         if not path.is_dir():
             raise InputError(
-                path, "sequence folder not found", "set the dataset's data (or its ${VARIABLE})"
+                path, "sequence folder not found", "fix the dataset's data in the sweep file or the ${VARIABLE} it uses"
             )
     for mesh in dict.fromkeys(cell.evaluation.gt_mesh for cell in cells):
         if mesh is not None and not mesh.is_file():
@@ -386,7 +376,6 @@ def run_sweep(
     backend: str = "local",
     jobs: int = 1,
     address: str | None = None,
-    only: Sequence[str] = (),
     progress: bool = True,
     extra: Sequence[str] = (),
 ) -> SweepSummary:
@@ -400,7 +389,6 @@ def run_sweep(
         jobs: local backend: cells at a time (worker processes when > 1).
         address: ray backend: the cluster to join (``auto``, ``host:6379``); None starts
             a local one (or uses the one this process already initialised).
-        only: dataset names to run (default: all).
         progress: a bar over cells on stderr.
         extra: ``key=value`` overrides of every cell, applied last (before the seed).
 
@@ -413,7 +401,7 @@ def run_sweep(
     if jobs < 1:
         raise ConfigError(f"--jobs must be >= 1, got {jobs}")
     out = Path(out)
-    cells = plan_cells(sweep, out, only, extra)
+    cells = plan_cells(sweep, out, extra)
     check_inputs(cells)
     out.mkdir(parents=True, exist_ok=True)
     write_json(out / SWEEP_FILE, _grid(sweep, cells))

@@ -32,10 +32,11 @@ naming the sweep file and the key. docs/sweeps.md documents the format.
 
 from __future__ import annotations
 
+import dataclasses
 import difflib
 import os
 import re
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -154,6 +155,26 @@ class SweepFile:
     overrides: tuple[str, ...] = ()
     resources: Resources = Resources()
     evaluation: tuple[tuple[str, Any], ...] = ()
+
+    def select(self, datasets: Sequence[str] = (), variants: Sequence[str] = ()) -> SweepFile:
+        """This sweep with only the named datasets and variants (all where none are named).
+
+        Raises:
+            ConfigError: a name the sweep file does not have.
+        """
+        chosen = {}
+        for kind, names, entries in (
+            ("dataset", datasets, self.datasets),
+            ("variant", variants, self.variants),
+        ):
+            have = [entry.name for entry in entries]
+            unknown = [name for name in names if name not in have]
+            if unknown:
+                raise ConfigError(
+                    f"{self.path}: no {kind} named {unknown[0]!r} (it has: {', '.join(have)})"
+                )
+            chosen[kind] = tuple(e for e in entries if not names or e.name in names)
+        return dataclasses.replace(self, datasets=chosen["dataset"], variants=chosen["variant"])
 
     def resolve(self, text: str, key: str) -> Path:
         """The path ``text`` of ``key``: ``${...}`` expanded, relative to the file's folder."""

@@ -212,6 +212,15 @@ def test_cli_sweep_exit_status_and_table(local_sweep, capsys: pytest.CaptureFixt
     assert main(["sweep", str(sweep_file), "--out", str(out), "--datasets", "nope"]) == 2
     err = capsys.readouterr().err.strip()
     assert "\n" not in err and "no dataset named 'nope'" in err and str(sweep_file) in err
+    dry = ["sweep", str(sweep_file), "--out", str(out), "--variants", "full", "--dry-run"]
+    assert main(dry) == 0
+    planned = json.loads(capsys.readouterr().out)
+    assert [(c["cell"], c["finished"]) for c in planned] == [
+        ("tiny/full/seed0", True),
+        ("tiny/full/seed1", True),
+    ]
+    assert main([*dry[:-3], "--variants", "ful"]) == 2
+    assert "no variant named 'ful' (it has: full, nopose, broken)" in capsys.readouterr().err
 
 
 @pytest.mark.slow
