@@ -240,7 +240,9 @@ def check_inputs(cells: Sequence[Cell]) -> None:
     for path in dict.fromkeys(Path(str(cell.config.data.path)) for cell in cells):
         if not path.is_dir():
             raise InputError(
-                path, "sequence folder not found", "fix the dataset's data in the sweep file or the ${VARIABLE} it uses"
+                path,
+                "sequence folder not found",
+                "fix the dataset's data in the sweep file, or the ${VARIABLE} it uses",
             )
     for mesh in dict.fromkeys(cell.evaluation.gt_mesh for cell in cells):
         if mesh is not None and not mesh.is_file():
