@@ -27,7 +27,10 @@ def _one_line_error(capsys: pytest.CaptureFixture[str]) -> str:
     return err
 
 
-@pytest.mark.parametrize("command", [[], ["synth"], ["inspect"], ["ate"], ["recon"], ["configs"]])
+@pytest.mark.parametrize(
+    "command",
+    [[], ["synth"], ["inspect"], ["ate"], ["recon"], ["configs"], ["sweep"], ["table"]],
+)
 def test_help(command: list[str], capsys: pytest.CaptureFixture[str]) -> None:
     with pytest.raises(SystemExit) as exit_info:
         main([*command, "--help"])

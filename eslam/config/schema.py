@@ -49,6 +49,10 @@ class DataConfig:
     crop: int | None = None
     """Pixels removed on every border after resizing; null = the layout's default
     (ScanNet 10, TUM 8, others 0). Intrinsics follow."""
+    depth_downsample: int = 1
+    """Keep every k-th depth pixel per side and show it at full size (nearest): depth at
+    1/k resolution, colour and intrinsics unchanged; 8 is the paper's depth / 8 (suppl.
+    Tab. 1; eslam.data.depth_resolution). 1 = the depth as read."""
     camera: str | None = None
     """TUM only: fr1, fr2 or fr3 (intrinsics and distortion); null = from the folder name."""
     prefetch: int = 4
@@ -79,6 +83,7 @@ class DataConfig:
             raise ValueError(f"prefetch must be >= 0 frames (0 = off), got {self.prefetch}")
         if self.replay_fps is not None and not self.replay_fps > 0:
             raise ValueError(f"replay_fps must be > 0 or null, got {self.replay_fps}")
+        _at_least(self, "depth_downsample", 1)
 
 
 @dataclass

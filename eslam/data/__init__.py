@@ -12,6 +12,7 @@ from pathlib import Path
 
 from eslam.config import DataConfig
 from eslam.data.base import RGBDSequence, iterate_frames
+from eslam.data.depth_resolution import DepthDownsampled
 from eslam.data.folder import FolderSequence
 from eslam.data.replica import ReplicaSequence
 from eslam.data.scannet import ScanNetSequence
@@ -31,7 +32,9 @@ DATASETS: dict[str, Callable[[Path, DataConfig], RGBDSequence]] = {
 
 
 def open_sequence(options: DataConfig) -> RGBDSequence:
-    """Open ``options.path`` with the reader of ``options.format``, then select frames.
+    """Open ``options.path`` with the reader of ``options.format``, lower its depth
+    resolution (``options.depth_downsample``, :mod:`eslam.data.depth_resolution`), then
+    select frames.
 
     Raises:
         ConfigError: unknown layout, no path, or a frame selection outside the sequence.
@@ -40,6 +43,8 @@ def open_sequence(options: DataConfig) -> RGBDSequence:
     if options.path is None:
         raise ConfigError("data.path is not set (pass --data PATH or set data.path)")
     sequence = open_all_frames(options)
+    if options.depth_downsample > 1:
+        sequence = DepthDownsampled(sequence, options.depth_downsample)
     if options.start == 0 and options.stride == 1 and options.max_frames is None:
         return sequence
     return FrameSelection(sequence, options.start, options.stride, options.max_frames)

@@ -1,0 +1,589 @@
+"""`eslam sweep SWEEP.yaml --out DIR`: every cell of a sweep file run and evaluated.
+
+A cell is one (dataset, variant, seed) of the grid (:mod:`eslam.workflows.sweep_file`):
+its run folder ``DIR/<dataset>/<variant>/seed<k>/`` holds the usual run outputs
+(config.yaml fully resolved, trajectory, metrics.json ...), the evaluation of
+``eslam eval`` (metrics.json's ATE and, with a ground-truth mesh, the mesh metrics;
+report.md) and cell.json, the cell's status::
+
+    {"status": "running" | "done" | "failed" | "interrupted", "error": one line or null,
+     "run": "done" once the run finished (its evaluation may still fail), "evaluation":
+     the evaluation settings of a done cell, "seconds": ..., "dataset": ..., "variant":
+     ..., "seed": ..., "paper_scene": ..., "paper_experiment": ...}
+
+Backends: ``local`` runs cells one after another in this process (``jobs`` = 1) or in
+``jobs`` spawned worker processes; ``ray`` submits each cell as a Ray task asking for
+the sweep's ``resources`` (Ray, the ``[cluster]`` extra, is imported only here).
+Each cell's torch thread count is its ``threads`` setting (``resources.cpus`` unless
+overridden), set in the process that runs it.
+
+Resuming: a cell whose cell.json says done and whose config.yaml is the cell's
+resolved config is skipped, unless its evaluation settings changed (then only the
+evaluation runs again); one whose run stopped part way (same config, a map.pt)
+continues with ``eslam resume``'s logic; any other is run afresh. A failed cell records
+its one-line error (and the traceback of a bug) in cell.json and the sweep goes on.
+Ctrl-C stops the running cells as ``eslam run`` does (completed frames saved); finished
+cells are untouched.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import json
+import time
+import traceback
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+from eslam.config import ESLAMConfig, load_config
+from eslam.config.packaged import find_config
+from eslam.errors import ConfigError, ESLAMError, InputError
+from eslam.io.run_dir import RunDirectory, json_text, write_json
+from eslam.slam.loop import run_slam
+from eslam.slam.run_folder import absolute_data_path
+from eslam.synthetic import read_synthetic_bound
+from eslam.workflows.evaluate_run import EvaluationOptions, evaluate_run
+from eslam.workflows.sweep_file import SweepDataset, SweepFile, SweepVariant
+
+CELL_FILE = "cell.json"
+"""The status file of a cell (module docstring)."""
+SWEEP_FILE = "sweep.json"
+"""DIR/sweep.json: the grid of the last sweep into DIR (dataset, variant order for tables)."""
+BACKENDS = ("local", "ray")
+SYNTHETIC_MARKER = "synth.json"
+"""A sequence folder holding it is a synthetic scene: its cells get its exact bound."""
+
+
+@dataclass(frozen=True)
+class Cell:
+    """One run of a sweep.
+
+    Attributes:
+        dataset, variant, seed: where in the grid.
+        config: the resolved configuration (``data.path`` absolute).
+        run_dir: ``OUT/<dataset>/<variant>/seed<seed>``.
+        evaluation: how the finished run is scored.
+        paper_scene, paper_experiment: what of the paper it repeats (or None).
+    """
+
+    dataset: str
+    variant: str
+    seed: int
+    config: ESLAMConfig
+    run_dir: Path
+    evaluation: EvaluationOptions
+    paper_scene: str | None = None
+    paper_experiment: str | None = None
+
+    @property
+    def name(self) -> str:
+        """``dataset/variant/seed<k>``, the cell's folder under the sweep's output."""
+        return f"{self.dataset}/{self.variant}/seed{self.seed}"
+
+
+@dataclass(frozen=True)
+class CellOutcome:
+    """What running a cell did.
+
+    Attributes:
+        cell: the cell's name.
+        status: ``done``, ``failed``, ``skipped`` (finished before) or ``interrupted``.
+        error: the one-line error of a failed cell.
+        seconds: wall time of the run and its evaluation.
+    """
+
+    cell: str
+    status: str
+    error: str | None = None
+    seconds: float = 0.0
+
+
+@dataclass(frozen=True)
+class SweepSummary:
+    """The outcome of every cell of a sweep, in grid order."""
+
+    out: Path
+    outcomes: tuple[CellOutcome, ...]
+
+    def count(self, status: str) -> int:
+        """Cells with ``status``."""
+        return sum(outcome.status == status for outcome in self.outcomes)
+
+    @property
+    def failed(self) -> tuple[CellOutcome, ...]:
+        """The failed cells."""
+        return tuple(outcome for outcome in self.outcomes if outcome.status == "failed")
+
+    def text(self) -> str:
+        """One summary line."""
+        failed = self.failed
+        line = (
+            f"sweep {self.out}: {len(self.outcomes)} cells, {self.count('done')} run, "
+            f"{self.count('skipped')} finished before, {len(failed)} failed"
+        )
+        if failed:
+            line += f" (errors in {failed[0].cell}/{CELL_FILE} ...; rerun to retry them)"
+        return line
+
+
+def plan_cells(sweep: SweepFile, out: str | Path, extra: Sequence[str] = ()) -> list[Cell]:
+    """Every cell of ``sweep`` (``SweepFile.select`` picks datasets and variants), with
+    its resolved configuration, in grid order (dataset, variant, seed); ``extra``
+    overrides every cell last (``eslam sweep SWEEP key=value``, e.g. ``device=cuda``).
+
+    Override order: ``threads`` (= resources.cpus), ``output.progress=false`` (the sweep
+    draws one bar over cells), ``data.path``, the synthetic bound (module
+    SYNTHETIC_MARKER), the sweep's overrides, the dataset's, the variant's, the
+    dataset's for the variant (``variant_overrides``), ``extra``, ``seed``.
+
+    Raises:
+        ConfigError: a missing config, an invalid
+            override or evaluation setting; the message names the sweep file and cell.
+    """
+    cells = []
+    for dataset in sweep.datasets:
+        evaluation = _evaluation_options(sweep, dataset)
+        data = sweep.resolve(dataset.data, f"{dataset.name}.data").absolute()
+        gt_mesh = (
+            None
+            if dataset.gt_mesh is None
+            else sweep.resolve(dataset.gt_mesh, "gt_mesh").absolute()
+        )
+        for variant in sweep.variants:
+            first = _cell_config(sweep, (dataset, variant), data, sweep.seeds[0], extra)
+            for seed in sweep.seeds:
+                config = dataclasses.replace(first, seed=seed)  # seed is the last override
+                if gt_mesh is not None and not config.output.mesh:
+                    raise ConfigError(
+                        f"{sweep.path}: dataset {dataset.name!r} has a gt_mesh but variant "
+                        f"{variant.name!r} sets output.mesh=false (no mesh to score): drop "
+                        "one of them"
+                    )
+                cells.append(
+                    Cell(
+                        dataset.name,
+                        variant.name,
+                        seed,
+                        config,
+                        Path(out) / dataset.name / variant.name / f"seed{seed}",
+                        dataclasses.replace(evaluation, gt_mesh=gt_mesh, device=config.device),
+                        dataset.paper,
+                        variant.paper,
+                    )
+                )
+    return cells
+
+
+def _evaluation_options(sweep: SweepFile, dataset: SweepDataset) -> EvaluationOptions:
+    """The sweep's evaluation settings with the dataset's over them."""
+    try:
+        return EvaluationOptions(**{**dict(sweep.evaluation), **dict(dataset.evaluation)})
+    except (ConfigError, TypeError) as error:
+        raise ConfigError(f"{sweep.path}: evaluation of {dataset.name!r}: {error}") from None
+
+
+def _config_file(sweep: SweepFile, text: str, key: str) -> Path:
+    """A config's file: a path relative to the sweep file, else a packaged config."""
+    path = sweep.resolve(text, key)
+    if path.is_file():
+        return path
+    try:
+        return find_config(text)
+    except ConfigError:
+        raise ConfigError(
+            f"{sweep.path}: {key}: {text} is neither a file next to the sweep file nor a "
+            "packaged config (`eslam configs` lists them)"
+        ) from None
+
+
+def _cell_config(
+    sweep: SweepFile,
+    where: tuple[SweepDataset, SweepVariant],
+    data: Path,
+    seed: int,
+    extra: Sequence[str],
+) -> ESLAMConfig:
+    dataset, variant = where
+    key = "base" if dataset.config is None else f"{dataset.name}.config"
+    config_file = _config_file(sweep, dataset.config or sweep.base, key)
+    bound = []
+    if (data / SYNTHETIC_MARKER).is_file():
+        bound = [f"scene.bound={read_synthetic_bound(data)}"]
+    overrides = [
+        f"threads={sweep.resources.cpus}",
+        "output.progress=false",
+        f"data.path={data}",
+        *bound,
+        *sweep.overrides,
+        *dataset.overrides,
+        *variant.overrides,
+        *dataset.overrides_of(variant.name),
+        *extra,
+        f"seed={seed}",
+    ]
+    try:
+        return absolute_data_path(load_config(config_file, overrides))
+    except ConfigError as error:
+        raise ConfigError(
+            f"{sweep.path}: dataset {dataset.name!r}, variant {variant.name!r}: {error}"
+        ) from None
+
+
+def check_inputs(cells: Sequence[Cell]) -> None:
+    """Refuse a sweep whose sequences or ground-truth meshes are missing, before any run.
+
+    Raises:
+        InputError: the first missing folder or file, named.
+    """
+    for path in dict.fromkeys(Path(str(cell.config.data.path)) for cell in cells):
+        if not path.is_dir():
+            raise InputError(
+                path,
+                "sequence folder not found",
+                "fix the dataset's data in the sweep file, or the ${VARIABLE} it uses",
+            )
+    for mesh in dict.fromkeys(cell.evaluation.gt_mesh for cell in cells):
+        if mesh is not None and not mesh.is_file():
+            raise InputError(mesh, "ground-truth mesh not found", "fix the dataset's gt_mesh")
+
+
+def is_finished(cell: Cell) -> bool:
+    """True when the cell's folder holds its finished run of the same config, evaluated
+    with the same settings."""
+    return _run_finished(cell) and _read_status(cell.run_dir).get("evaluation") == _evaluation(cell)
+
+
+def _run_finished(cell: Cell) -> bool:
+    """True when the cell's run (not necessarily its evaluation) finished with its config."""
+    run = RunDirectory(cell.run_dir)
+    status = _read_status(cell.run_dir)
+    if status.get("run") != "done" or not run.metrics.is_file():
+        return False
+    return _same_config(run, cell.config)
+
+
+def _evaluation(cell: Cell) -> dict:
+    """The cell's evaluation settings as cell.json records them."""
+    return json.loads(json_text(dataclasses.asdict(cell.evaluation)))
+
+
+def _same_config(run: RunDirectory, config: ESLAMConfig) -> bool:
+    if not run.config.is_file():
+        return False
+    try:
+        return load_config(run.config) == config
+    except ESLAMError:
+        return False
+
+
+def _read_status(run_dir: Path) -> dict:
+    try:
+        status = json.loads((run_dir / CELL_FILE).read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return {}
+    return status if isinstance(status, dict) else {}
+
+
+def _write_status(cell: Cell, status: str, **more: object) -> None:
+    record = {
+        "status": status,
+        "dataset": cell.dataset,
+        "variant": cell.variant,
+        "seed": cell.seed,
+        "paper_scene": cell.paper_scene,
+        "paper_experiment": cell.paper_experiment,
+        "error": None,
+        **more,
+    }
+    write_json(cell.run_dir / CELL_FILE, record)
+
+
+@contextlib.contextmanager
+def cell_threads(threads: int) -> Iterator[None]:
+    """torch's CPU threads set to ``threads`` (0 = unchanged) inside, restored after."""
+    import torch
+
+    previous = torch.get_num_threads()
+    if threads > 0:
+        torch.set_num_threads(threads)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(previous)
+
+
+def one_line(error: BaseException) -> str:
+    """An error as one line: an ESLAMError's own message, else ``Type: first line``."""
+    text = str(error).strip()
+    first = text.splitlines()[0] if text else ""
+    if isinstance(error, ESLAMError):
+        return first
+    return f"{type(error).__name__}: {first}" if first else type(error).__name__
+
+
+def run_cell(cell: Cell) -> CellOutcome:
+    """Run and evaluate ``cell`` (skipped when finished before); record cell.json.
+
+    Errors are recorded, not raised (the sweep goes on); Ctrl-C is recorded as
+    ``interrupted`` and raised again.
+    """
+    if is_finished(cell):
+        return CellOutcome(cell.name, "skipped")
+    started = time.monotonic()
+    run = RunDirectory(cell.run_dir)
+    ran = _run_finished(cell)  # only the evaluation settings changed: evaluate again
+    resume = not ran and run.map.is_file() and _same_config(run, cell.config)
+    cell.run_dir.mkdir(parents=True, exist_ok=True)
+    _write_status(cell, "running", run="done" if ran else None)
+    try:
+        with cell_threads(cell.config.threads):
+            if not ran:
+                run_slam(cell.config, cell.run_dir, resume=resume, overwrite=not resume)
+                _write_status(cell, "running", run="done")
+            evaluate_run(cell.run_dir, cell.evaluation)
+    except KeyboardInterrupt:
+        run_state = _read_status(cell.run_dir).get("run")
+        _write_status(cell, "interrupted", run=run_state, seconds=time.monotonic() - started)
+        raise
+    except Exception as error:
+        seconds = time.monotonic() - started
+        trace = None if isinstance(error, ESLAMError) else traceback.format_exc()
+        run_state = _read_status(cell.run_dir).get("run")
+        _write_status(
+            cell, "failed", run=run_state, error=one_line(error), traceback=trace, seconds=seconds
+        )
+        return CellOutcome(cell.name, "failed", one_line(error), seconds)
+    seconds = time.monotonic() - started
+    _write_status(cell, "done", run="done", evaluation=_evaluation(cell), seconds=seconds)
+    return CellOutcome(cell.name, "done", None, seconds)
+
+
+def _run_cell_in_worker(cell: Cell) -> CellOutcome:
+    """:func:`run_cell` in a worker process: Ctrl-C there is an outcome, not an error
+    (the driver stops the sweep)."""
+    try:
+        return run_cell(cell)
+    except KeyboardInterrupt:
+        return CellOutcome(cell.name, "interrupted")
+
+
+Report = Callable[[CellOutcome], None]
+
+
+def run_sweep(
+    sweep: SweepFile,
+    out: str | Path,
+    backend: str = "local",
+    jobs: int = 1,
+    address: str | None = None,
+    progress: bool = True,
+    extra: Sequence[str] = (),
+) -> SweepSummary:
+    """Run every cell of ``sweep`` into ``out`` (module docstring).
+
+    Args:
+        sweep: the parsed sweep file.
+        out: the output folder (with Ray on several machines: a folder every node reaches
+            at the same path).
+        backend: ``local`` or ``ray``.
+        jobs: local backend: cells at a time (worker processes when > 1).
+        address: ray backend: the cluster to join (``auto``, ``host:6379``); None starts
+            a local one (or uses the one this process already initialised).
+        progress: a bar over cells on stderr.
+        extra: ``key=value`` overrides of every cell, applied last (before the seed).
+
+    Raises:
+        ConfigError, InputError: a bad sweep file or missing input, before any cell runs.
+        KeyboardInterrupt: Ctrl-C, after the running cells saved their frames.
+    """
+    if backend not in BACKENDS:
+        raise ConfigError(f"unknown backend {backend!r} (choose {' or '.join(BACKENDS)})")
+    if jobs < 1:
+        raise ConfigError(f"--jobs must be >= 1, got {jobs}")
+    out = Path(out)
+    cells = plan_cells(sweep, out, extra)
+    check_inputs(cells)
+    out.mkdir(parents=True, exist_ok=True)
+    write_json(out / SWEEP_FILE, _grid(sweep, cells))
+    outcomes: dict[str, CellOutcome] = {}
+    pending = []
+    for cell in cells:
+        if is_finished(cell):
+            outcomes[cell.name] = CellOutcome(cell.name, "skipped")
+        else:
+            pending.append(cell)
+    with _progress_bar(len(cells), len(outcomes), progress) as report:
+
+        def record(outcome: CellOutcome) -> None:
+            outcomes[outcome.cell] = outcome
+            report(outcome)
+
+        try:
+            if backend == "ray":
+                _run_on_ray(pending, sweep, address, record)
+            elif jobs == 1:
+                for cell in pending:
+                    record(run_cell(cell))
+            else:
+                _run_in_processes(pending, jobs, record)
+        except KeyboardInterrupt:
+            finished = sum(o.status in ("done", "skipped") for o in outcomes.values())
+            raise KeyboardInterrupt(
+                f"interrupted: {finished} of {len(cells)} cells finished and kept, running "
+                f"cells saved their frames; run the same eslam sweep command to continue"
+            ) from None
+    return SweepSummary(out, tuple(outcomes[cell.name] for cell in cells))
+
+
+def _grid(sweep: SweepFile, cells: Sequence[Cell]) -> dict:
+    return {
+        "sweep_file": str(sweep.path.absolute()),
+        "datasets": list(dict.fromkeys(cell.dataset for cell in cells)),
+        "variants": [variant.name for variant in sweep.variants],
+        "seeds": list(sweep.seeds),
+        "resources": dataclasses.asdict(sweep.resources),
+    }
+
+
+@contextlib.contextmanager
+def _progress_bar(total: int, done: int, enabled: bool) -> Iterator[Report]:
+    """A tqdm bar over cells (ETA from the cells run so far); yields ``report(outcome)``."""
+    if not enabled:
+        yield lambda outcome: None
+        return
+    from tqdm import tqdm
+
+    failed = 0
+    with tqdm(total=total, initial=done, desc="sweep", unit="cell") as bar:
+
+        def report(outcome: CellOutcome) -> None:
+            nonlocal failed
+            failed += outcome.status == "failed"
+            bar.set_postfix_str(f"last {outcome.cell}: {outcome.status}, {failed} failed")
+            if outcome.status != "interrupted":
+                bar.update(1)
+
+        yield report
+
+
+def _stop_if_interrupted(outcome: CellOutcome) -> None:
+    if outcome.status == "interrupted":
+        raise KeyboardInterrupt(f"interrupted: cell {outcome.cell} stopped (its frames saved)")
+
+
+def _run_in_processes(cells: Sequence[Cell], jobs: int, record: Report) -> None:
+    """Cells in ``jobs`` spawned worker processes (each sets its own torch threads)."""
+    import multiprocessing
+    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+
+    context = multiprocessing.get_context("spawn")
+    executor = ProcessPoolExecutor(max_workers=jobs, mp_context=context)
+    try:
+        running = {executor.submit(_run_cell_in_worker, cell): cell for cell in cells}
+        while running:
+            finished, _ = wait(running, return_when=FIRST_COMPLETED)
+            for future in finished:
+                cell = running.pop(future)
+                try:
+                    outcome = future.result()
+                except Exception as error:  # the worker process died (killed, out of memory)
+                    outcome = worker_lost(cell, error)
+                record(outcome)
+                _stop_if_interrupted(outcome)
+    except KeyboardInterrupt:
+        executor.shutdown(wait=True, cancel_futures=True)  # running cells save their frames
+        raise
+    executor.shutdown(wait=True)
+
+
+def worker_lost(cell: Cell, error: BaseException) -> CellOutcome:
+    """Record ``cell`` as failed when the process running it died without an outcome."""
+    message = f"the worker process running the cell died ({one_line(error)})"
+    _write_status(cell, "failed", error=message)
+    return CellOutcome(cell.name, "failed", message)
+
+
+def _ray_module():
+    try:
+        import ray
+    except ImportError:
+        raise ConfigError(
+            '--backend ray needs Ray: pip install "eslam[cluster]" (or use --backend local)'
+        ) from None
+    return ray
+
+
+def _run_on_ray(
+    cells: Sequence[Cell], sweep: SweepFile, address: str | None, record: Report
+) -> None:
+    """Each cell a Ray task asking for the sweep's resources."""
+    ray = _ray_module()
+    started = not ray.is_initialized()
+    if started:
+        try:
+            ray.init(address=address or "local")
+        except (ConnectionError, RuntimeError, ValueError) as error:
+            raise ConfigError(
+                f"--address {address or 'local'}: cannot start or join the Ray cluster "
+                f"({one_line(error)}); see docs/sweeps.md"
+            ) from None
+    try:
+        _check_cluster(ray.cluster_resources(), sweep)
+        resources = sweep.resources
+        task = ray.remote(num_cpus=resources.cpus, num_gpus=resources.gpus, max_retries=1)(
+            _run_cell_in_worker
+        )
+        refs = {task.remote(cell): cell for cell in cells}
+        running = list(refs)
+        try:
+            while running:
+                finished, running = ray.wait(running, num_returns=1)
+                try:
+                    outcome = ray.get(finished[0])
+                except Exception as error:  # the task's worker died after its retry
+                    outcome = worker_lost(refs[finished[0]], error)
+                record(outcome)
+                _stop_if_interrupted(outcome)
+        except KeyboardInterrupt:
+            for ref in running:
+                ray.cancel(ref)  # a KeyboardInterrupt in the task: its frames are saved
+            with contextlib.suppress(Exception):
+                ray.wait(running, num_returns=len(running), timeout=60)
+            raise
+    finally:
+        if started:
+            ray.shutdown()
+
+
+def _check_cluster(available: dict, sweep: SweepFile) -> None:
+    """Refuse resources no node offers (such tasks would wait forever).
+
+    Raises:
+        ConfigError: more CPUs or GPUs per cell than the cluster has.
+    """
+    resources = sweep.resources
+    for name, asked in (("CPU", resources.cpus), ("GPU", resources.gpus)):
+        have = float(available.get(name, 0.0))
+        if asked > have:
+            raise ConfigError(
+                f"{sweep.path}: resources.{name.lower()}s: each cell asks for {asked:g} {name}s "
+                f"but the Ray cluster has {have:g}: lower it (gpus: 0 on machines without "
+                "GPUs) or join a cluster that has them (--address)"
+            )
+
+
+def describe_cells(cells: Sequence[Cell]) -> str:
+    """The planned grid as JSON text (``eslam sweep --dry-run``)."""
+    return json_text(
+        [
+            {
+                "cell": cell.name,
+                "data": cell.config.data.path,
+                "finished": is_finished(cell),
+                "gt_mesh": cell.evaluation.gt_mesh,
+            }
+            for cell in cells
+        ]
+    )
