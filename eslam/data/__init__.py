@@ -11,9 +11,11 @@ from collections.abc import Callable
 from pathlib import Path
 
 from eslam.config import DataConfig
+from eslam.data.bags import effective_format
 from eslam.data.base import RGBDSequence, iterate_frames
 from eslam.data.folder import FolderSequence
 from eslam.data.replica import ReplicaSequence
+from eslam.data.rosbag import RosbagSequence
 from eslam.data.scannet import ScanNetSequence
 from eslam.data.selection import FrameSelection, sequence_timestamps
 from eslam.data.sevenscenes import SevenScenesSequence
@@ -26,6 +28,7 @@ DATASETS: dict[str, Callable[[Path, DataConfig], RGBDSequence]] = {
     "tum": TUMSequence,
     "sevenscenes": SevenScenesSequence,
     "folder": FolderSequence,
+    "rosbag": RosbagSequence,
 }
 """Reader of each supported layout, by the name ``data.format`` takes."""
 
@@ -46,8 +49,9 @@ def open_sequence(options: DataConfig) -> RGBDSequence:
 
 
 def open_all_frames(options: DataConfig) -> RGBDSequence:
-    """Open every frame of ``options.path`` with the reader of ``options.format``."""
-    format_name = options.format
+    """Open every frame of ``options.path`` with the reader of ``options.format`` (a
+    recording's own format when the path is one: :func:`~eslam.data.bags.effective_format`)."""
+    format_name = effective_format(options.format, options.path)
     try:
         reader = DATASETS[format_name]
     except KeyError:
@@ -62,6 +66,7 @@ __all__ = [
     "DATASETS",
     "FrameSelection",
     "RGBDSequence",
+    "effective_format",
     "iterate_frames",
     "open_all_frames",
     "open_sequence",
