@@ -167,7 +167,12 @@ def _command_run(args: argparse.Namespace) -> int:
     config = load_config(args.config, overrides)
     out = Path(args.out) if args.out else Path(default_run_name(args.config))
     _process_settings(config)
-    _print_metrics(run_slam(config, out, overwrite=args.overwrite))
+    source = None
+    if args.source is not None:
+        from eslam.data.realsense import open_camera
+
+        source = open_camera(args.source, args.camera_size, args.camera_fps, args.data)
+    _print_metrics(run_slam(config, out, overwrite=args.overwrite, source=source))
     return 0
 
 
@@ -492,6 +497,18 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--stride", type=int, help="use every N-th frame (sets data.stride)")
     run.add_argument("--max-frames", type=int, help="use at most N frames (sets data.max_frames)")
     run.add_argument("--overwrite", action="store_true", help="reuse an existing run folder")
+    run.add_argument(
+        "--source",
+        metavar="realsense[:SERIAL]",
+        help="a live RealSense camera instead of --data (docs/live.md; the realsense extra)",
+    )
+    run.add_argument(
+        "--camera-size", type=_image_size, default=(640, 480), metavar="WxH",
+        help="live camera: depth and colour size (default 640x480)",
+    )  # fmt: skip
+    run.add_argument(
+        "--camera-fps", type=_positive_int, default=30, help="live camera: frame rate (30)"
+    )
     run.set_defaults(handler=_command_run)
 
     configs = commands.add_parser(

@@ -14,6 +14,7 @@ from eslam.config import DataConfig
 from eslam.data.bags import effective_format
 from eslam.data.base import RGBDSequence, iterate_frames
 from eslam.data.folder import FolderSequence
+from eslam.data.realsense import RealSenseRecording
 from eslam.data.replica import ReplicaSequence
 from eslam.data.rosbag import RosbagSequence
 from eslam.data.scannet import ScanNetSequence
@@ -29,6 +30,7 @@ DATASETS: dict[str, Callable[[Path, DataConfig], RGBDSequence]] = {
     "sevenscenes": SevenScenesSequence,
     "folder": FolderSequence,
     "rosbag": RosbagSequence,
+    "realsense": RealSenseRecording,
 }
 """Reader of each supported layout, by the name ``data.format`` takes."""
 

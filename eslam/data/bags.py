@@ -9,8 +9,10 @@ folder layout could read it: a RealSense recording (librealsense's ``/file_versi
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
+from eslam.config import DataConfig
 from eslam.errors import InputError
 
 RECORDING_FORMATS = ("rosbag", "realsense")
@@ -101,3 +103,9 @@ def effective_format(format_name: str, path: str | Path | None) -> str:
         return format_name
     detected = recording_format(Path(str(path)))
     return detected if detected is not None else format_name
+
+
+def with_detected_format(options: DataConfig) -> DataConfig:
+    """``options`` with ``format`` set to :func:`effective_format` (what a run records)."""
+    detected = effective_format(options.format, options.path)
+    return options if detected == options.format else dataclasses.replace(options, format=detected)

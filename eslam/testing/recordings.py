@@ -8,6 +8,7 @@ recorder layout.
 
 from __future__ import annotations
 
+import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -274,3 +275,102 @@ def write_ros_bag(
             for offset, (role, msgtype, message) in enumerate(messages):
                 writer.write(connections[role], logged + offset, serialize(message, msgtype))
     return path
+
+
+REALSENSE_DEPTH_UNITS = 0.00025
+"""Metres per depth unit :func:`write_realsense_recording` records (a D400's 0.25 mm mode)."""
+
+
+def _rs_intrinsics(rs, camera: Intrinsics):
+    k = rs.intrinsics()
+    k.width, k.height = camera.width, camera.height
+    k.fx, k.fy, k.ppx, k.ppy = camera.fx, camera.fy, camera.cx, camera.cy
+    k.model = rs.distortion.brown_conrady
+    k.coeffs = [0.0] * 5
+    return k
+
+
+def write_realsense_recording(
+    path: str | Path,
+    frames: Sequence[Frame],
+    depth_units: float = REALSENSE_DEPTH_UNITS,
+    depth_camera: Intrinsics | None = None,
+) -> Path:
+    """Record ``frames`` with librealsense's recorder from its software device (a .db3).
+
+    Depth and colour sensors stream Z16 and RGB8 at 30 fps; frame n has frame number
+    n + 1 on both and time (n + 1) * 33.3 ms. Needs pyrealsense2.
+
+    Args:
+        path: the .db3 file to write.
+        frames: frames sharing one camera (colour's; also depth's unless ``depth_camera``).
+        depth_units: the depth sensor's metres per unit.
+        depth_camera: a different depth camera (same centre, identity extrinsics): depth
+            is resampled to it (nearest pixel), so playback must align it to colour.
+
+    Returns:
+        ``path``.
+    """
+    from eslam.data.realsense import import_pyrealsense2
+
+    rs = import_pyrealsense2()
+    colour_camera = frames[0].intrinsics
+    depth_camera = depth_camera or colour_camera
+    device = rs.software_device()
+    depth_sensor, colour_sensor = device.add_sensor("Depth"), device.add_sensor("Color")
+    profiles = []
+    for uid, (sensor, kind, camera, fmt, bpp) in enumerate(
+        [
+            (depth_sensor, rs.stream.depth, depth_camera, rs.format.z16, 2),
+            (colour_sensor, rs.stream.color, colour_camera, rs.format.rgb8, 3),
+        ]
+    ):
+        stream = rs.video_stream()
+        stream.type, stream.index, stream.uid = kind, 0, uid
+        stream.width, stream.height, stream.fps = camera.width, camera.height, 30
+        stream.bpp, stream.fmt, stream.intrinsics = bpp, fmt, _rs_intrinsics(rs, camera)
+        profiles.append(sensor.add_video_stream(stream))
+    depth_sensor.add_read_only_option(rs.option.depth_units, depth_units)
+    identity = rs.extrinsics()
+    identity.rotation, identity.translation = [1, 0, 0, 0, 1, 0, 0, 0, 1], [0, 0, 0]
+    profiles[0].register_extrinsics_to(profiles[1], identity)
+    recorder = rs.recorder(str(path), device)
+    depth_sensor.open(profiles[0])
+    colour_sensor.open(profiles[1])
+    queue = rs.frame_queue(len(frames) * 2 + 2)
+    depth_sensor.start(queue)
+    colour_sensor.start(queue)
+    for number, frame in enumerate(frames):
+        depth_m = frame.depth
+        if depth_camera != colour_camera:
+            v, u = np.mgrid[0 : depth_camera.height, 0 : depth_camera.width]
+            cu = np.rint(
+                (u - depth_camera.cx) / depth_camera.fx * colour_camera.fx + colour_camera.cx
+            )
+            cv = np.rint(
+                (v - depth_camera.cy) / depth_camera.fy * colour_camera.fy + colour_camera.cy
+            )
+            cu = np.clip(cu, 0, colour_camera.width - 1).astype(int)
+            cv = np.clip(cv, 0, colour_camera.height - 1).astype(int)
+            depth_m = depth_m[cv, cu]
+        units = np.clip(np.round(np.nan_to_num(depth_m) / depth_units), 0, 65535)
+        images = [
+            (depth_sensor, profiles[0], np.ascontiguousarray(units.astype(np.uint16)), 2),
+            (colour_sensor, profiles[1], np.ascontiguousarray(frame.rgb), 3),
+        ]
+        for sensor, profile, pixels, bpp in images:
+            video = rs.software_video_frame()
+            video.pixels, video.bpp, video.stride = pixels, bpp, pixels.shape[1] * bpp
+            video.timestamp = (number + 1) * 33.3
+            video.domain = rs.timestamp_domain.hardware_clock
+            video.frame_number = number + 1
+            video.profile = profile.as_video_stream_profile()
+            if sensor is depth_sensor:
+                video.depth_units = depth_units
+            sensor.on_video_frame(video)
+        time.sleep(FRAME_PERIOD_NS / 1e9)  # the recorder stamps messages by the clock
+    for sensor in (depth_sensor, colour_sensor):
+        sensor.stop()
+        sensor.close()
+    del recorder  # closes the file
+    return Path(path)
