@@ -15,6 +15,7 @@ from eslam.data.bags import effective_format
 from eslam.data.base import RGBDSequence, iterate_frames
 from eslam.data.folder import FolderSequence
 from eslam.data.realsense import RealSenseRecording
+from eslam.data.redwood import RedwoodSequence
 from eslam.data.replica import ReplicaSequence
 from eslam.data.rosbag import RosbagSequence
 from eslam.data.scannet import ScanNetSequence
@@ -29,6 +30,7 @@ DATASETS: dict[str, Callable[[Path, DataConfig], RGBDSequence]] = {
     "tum": TUMSequence,
     "sevenscenes": SevenScenesSequence,
     "folder": FolderSequence,
+    "redwood": RedwoodSequence,
     "rosbag": RosbagSequence,
     "realsense": RealSenseRecording,
 }

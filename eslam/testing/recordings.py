@@ -374,3 +374,34 @@ def write_realsense_recording(
         sensor.close()
     del recorder  # closes the file
     return Path(path)
+
+
+def write_redwood_folder(
+    root: str | Path, frames: Sequence[Frame], camera_json: bool = True, trajectory: bool = True
+) -> Path:
+    """Write ``frames`` in Open3D's reconstruction-system layout: image/NNNNNN.png,
+    depth/NNNNNN.png (millimetres), camera_intrinsic.json and trajectory.log (the poses,
+    which every frame must have)."""
+    import json
+
+    from PIL import Image
+
+    from eslam.atomic import write_text, write_with
+
+    root = Path(root)
+    blocks = []
+    for number, frame in enumerate(frames):
+        colour, depth = Image.fromarray(frame.rgb), Image.fromarray(depth_millimetres(frame.depth))
+        write_with(root / "image" / f"{number:06d}.png", lambda t, i=colour: i.save(t, "PNG"))
+        write_with(root / "depth" / f"{number:06d}.png", lambda t, i=depth: i.save(t, "PNG"))
+        if trajectory:
+            rows = "\n".join(" ".join(f"{v:.17g}" for v in row) for row in frame.pose_gt)
+            blocks.append(f"{number} {number} {number + 1}\n{rows}\n")
+    camera = frames[0].intrinsics
+    if camera_json:
+        k = [camera.fx, 0.0, 0.0, 0.0, camera.fy, 0.0, camera.cx, camera.cy, 1.0]
+        data = {"width": camera.width, "height": camera.height, "intrinsic_matrix": k}
+        write_text(root / "camera_intrinsic.json", json.dumps(data))
+    if trajectory:
+        write_text(root / "trajectory.log", "".join(blocks))
+    return root
