@@ -45,6 +45,7 @@ class BagLayout:
         big_endian: write 16-bit depth big-endian (is_bigendian = 1).
         distortion: plumb-bob coefficients written to the camera info.
         depth_offset_ns: added to every depth stamp (colour and depth not simultaneous).
+        extra_colour_topics: more topics carrying the same colour images.
     """
 
     storage: str = "ros1"
@@ -61,6 +62,7 @@ class BagLayout:
     big_endian: bool = False
     distortion: tuple[float, ...] = (0.0, 0.0, 0.0, 0.0, 0.0)
     depth_offset_ns: int = 0
+    extra_colour_topics: tuple[str, ...] = ()
 
 
 def frame_stamp_ns(number: int) -> int:
@@ -242,6 +244,10 @@ def write_ros_bag(
                 info_topic, "sensor_msgs/msg/CameraInfo", typestore=store
             ),
         }
+        for number, topic in enumerate(layout.extra_colour_topics):
+            connections[f"extra{number}"] = writer.add_connection(
+                topic, image_type, typestore=store
+            )
         if layout.pose_topic is not None:
             pose_type = _POSE_TYPES[layout.pose_type]
             connections["pose"] = writer.add_connection(
@@ -266,6 +272,9 @@ def write_ros_bag(
                 ("depth", image_type, depth),
                 ("colour", image_type, colour),
                 ("info", "sensor_msgs/msg/CameraInfo", info),
+            ]
+            messages += [
+                (f"extra{k}", image_type, colour) for k in range(len(layout.extra_colour_topics))
             ]
             if layout.pose_topic is not None and frame.pose_gt is not None:
                 pose_header = build.header(stamp, "world", number)
