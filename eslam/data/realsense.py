@@ -6,11 +6,12 @@ imported only here, when a RealSense input is opened.
 
 Recordings (librealsense's ``.bag``, or the ``.db3`` its recorder writes since 2.58)
 are played back without a camera and not in real time, so no frame is lost to a slow
-reader. Opening one plays it through once to index it: each frameset's depth and
-colour frame numbers. The SDK's frame syncer may put one frame in several framesets
-(d1/c1, d2/c1, d2/c2): a colour frame is kept once, with the depth frame nearest to it
-in time that no earlier frame used, never by arrival order. Frames are then decoded
-by playing on from the last one read (backwards: from the start again).
+reader. Opening one plays it through once to index every depth and colour frame (frame
+number and time); colour and depth are paired by time (mutual nearest within
+:data:`PAIR_TOLERANCE_S`, :func:`eslam.data.rosbag.pair_by_stamp`), never by arrival
+order: the SDK's framesets repeat frames in playback (d1/c1, d2/c1, d2/c2) and leave
+the first ones unpaired. A frame is then decoded by playing on from the last one read
+(an earlier frame: from the start again).
 
 Depth is aligned to colour with ``rs.align(rs.stream.color)``, unless the recording's
 depth already is registered to colour (same intrinsics, identity extrinsics), where
