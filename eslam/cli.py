@@ -172,7 +172,11 @@ def _command_run(args: argparse.Namespace) -> int:
         from eslam.data.realsense import open_camera
 
         source = open_camera(args.source, args.camera_size, args.camera_fps, args.data)
-    _print_metrics(run_slam(config, out, overwrite=args.overwrite, source=source))
+    try:
+        _print_metrics(run_slam(config, out, overwrite=args.overwrite, source=source))
+    finally:
+        if source is not None:
+            source.close()
     return 0
 
 

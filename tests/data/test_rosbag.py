@@ -9,8 +9,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from eslam.config import DataConfig
-from eslam.config.schema import TopicsConfig
+from eslam.config import DataConfig, TopicsConfig
 from eslam.data import open_sequence
 from eslam.data.bags import effective_format, recording_format
 from eslam.data.ros_messages import camera_model

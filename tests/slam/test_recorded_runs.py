@@ -17,12 +17,12 @@ from eslam.testing.recordings import BagLayout, write_ros_bag
 from eslam.workflows.demo import DEMO_CONFIG
 from tests.conftest import TINY
 
-FRAMES = 4
+FRAMES = 3
 """Frames of the tiny sequence recorded (a few: the runs are end-to-end checks)."""
 
 QUICK = (
     *TINY,
-    "mapping.first_iterations=15",
+    "mapping.first_iterations=8",
     "mapping.iterations=3",
     "tracking.render.iterations=4",
 )
