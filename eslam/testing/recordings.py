@@ -414,3 +414,88 @@ def write_redwood_folder(
     if trajectory:
         write_text(root / "trajectory.log", "".join(blocks))
     return root
+
+
+_STREAM_INFO = "uint32 fps\nstring encoding\nbool is_recommended\n"
+"""librealsense's realsense_msgs/StreamInfo definition."""
+
+
+def write_realsense_bag(
+    path: str | Path, frames: Sequence[Frame], depth_units: float = REALSENSE_DEPTH_UNITS
+) -> Path:
+    """Write ``frames`` as a ROS 1 ``.bag`` in librealsense's recording layout (its
+    ``src/media/readme.md``, as ``ros_reader.cpp`` reads it), with rosbags: the layout
+    RealSense Viewer recordings before 2.58 have.
+
+    Per sensor (0: Depth, 1: Color) an info KeyValue, a StreamInfo, the stream's camera
+    info ("Brown Conrady", no distortion), an identity transform and per frame an Image
+    (depth mono16 in ``depth_units``, colour rgb8) with header seq = frame number
+    (n + 1) and stamp = (n + 1) / 30 s. Uncompressed, nothing at bag time 0: librealsense
+    rejects both.
+    """
+    from rosbags.rosbag1 import Writer
+    from rosbags.typesys import get_types_from_msg
+
+    store = _typestore("ros1")
+    store.register(get_types_from_msg(_STREAM_INFO, "realsense_msgs/msg/StreamInfo"))
+    build = _Messages(store, ros1=True)
+    types = store.types
+    camera = frames[0].intrinsics
+    period = 1_000_000_000 // 30
+
+    def key_values(values: dict[str, str]) -> list:
+        return [types["diagnostic_msgs/msg/KeyValue"](key=k, value=v) for k, v in values.items()]
+
+    static: list[tuple[str, str, object]] = [
+        ("/file_version", "std_msgs/msg/UInt32", types["std_msgs/msg/UInt32"](data=3))
+    ]
+    device = key_values({"Name": "eslam test recording", "Serial Number": "0"})
+    static += [("/device_0/info", "diagnostic_msgs/msg/KeyValue", m) for m in device]
+    streams = (("sensor_0", "Depth_0", "Depth", "mono16"), ("sensor_1", "Color_0", "Color", "rgb8"))
+    for sensor, stream, name, encoding in streams:
+        prefix = f"/device_0/{sensor}"
+        static += [(f"{prefix}/info", "diagnostic_msgs/msg/KeyValue", m)
+                   for m in key_values({"Name": name})]  # fmt: skip
+        info = types["realsense_msgs/msg/StreamInfo"](
+            fps=30, encoding=encoding, is_recommended=True
+        )
+        static.append((f"{prefix}/{stream}/info", "realsense_msgs/msg/StreamInfo", info))
+        camera_info = build.camera_info(build.header(0, "0"), camera, (0.0,) * 5)
+        camera_info.distortion_model = "Brown Conrady"
+        static.append(
+            (f"{prefix}/{stream}/info/camera_info", "sensor_msgs/msg/CameraInfo", camera_info)
+        )
+        identity = types["geometry_msgs/msg/Transform"](
+            types["geometry_msgs/msg/Vector3"](0.0, 0.0, 0.0),
+            types["geometry_msgs/msg/Quaternion"](0.0, 0.0, 0.0, 1.0),
+        )
+        static.append((f"{prefix}/{stream}/tf/0", "geometry_msgs/msg/Transform", identity))
+    units = "/device_0/sensor_0/option/Depth Units"
+    static.append(
+        (f"{units}/value", "std_msgs/msg/Float32", types["std_msgs/msg/Float32"](depth_units))
+    )
+    meaning = types["std_msgs/msg/String"]("Number of meters represented by a single depth unit")
+    static.append((f"{units}/description", "std_msgs/msg/String", meaning))
+    path = Path(path)
+    with Writer(path) as writer:
+        connections: dict[str, object] = {}
+
+        def write(topic: str, msgtype: str, message: object, time_ns: int) -> None:
+            if topic not in connections:
+                connections[topic] = writer.add_connection(topic, msgtype, typestore=store)
+            writer.write(connections[topic], time_ns, store.serialize_ros1(message, msgtype))
+
+        for topic, msgtype, message in static:
+            write(topic, msgtype, message, 1)  # never at bag time 0
+        for number, frame in enumerate(frames):
+            stamp = (number + 1) * period
+            header = build.header(stamp, "0", number + 1)
+            images = (
+                ("/device_0/sensor_0/Depth_0/image/data",
+                 np.round(np.nan_to_num(frame.depth) / depth_units).astype(np.uint16), "mono16"),
+                ("/device_0/sensor_1/Color_0/image/data", frame.rgb, "rgb8"),
+            )  # fmt: skip
+            for topic, pixels, encoding in images:
+                message = build.image(header, np.ascontiguousarray(pixels), encoding, 0, False)
+                write(topic, "sensor_msgs/msg/Image", message, stamp)
+    return path

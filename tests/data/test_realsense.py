@@ -1,5 +1,6 @@
-"""RealSense input: recordings the SDK's software device writes, played back with
-pyrealsense2; the live camera's errors without a camera; the import guard."""
+"""RealSense input: recordings (the SDK's software device's .db3, a .bag in librealsense's
+layout written with rosbags) played back with pyrealsense2; the live camera's errors
+without a camera; the import guard."""
 
 from __future__ import annotations
 
@@ -17,6 +18,7 @@ from eslam.errors import ConfigError, InputError
 from eslam.testing.recordings import (
     REALSENSE_DEPTH_UNITS,
     BagLayout,
+    write_realsense_bag,
     write_realsense_recording,
     write_ros_bag,
 )
@@ -32,10 +34,17 @@ def rs():
     return pyrealsense2
 
 
-@pytest.fixture(scope="module")
-def recording(rs, small_frames: list, tmp_path_factory: pytest.TempPathFactory) -> Path:
-    path = tmp_path_factory.mktemp("realsense") / "rec.db3"
-    return write_realsense_recording(path, small_frames)
+@pytest.fixture(scope="module", params=["db3", "bag"])
+def recording(
+    request: pytest.FixtureRequest, rs, small_frames: list, tmp_path_factory
+) -> tuple[Path, np.ndarray]:
+    """A .db3 from the SDK's recorder (frame n at (n + 1) * 33.3 ms), or a ROS 1 .bag in
+    librealsense's layout written with rosbags (frame n at (n + 1) / 30 s)."""
+    folder = tmp_path_factory.mktemp("realsense")
+    numbers = np.arange(1, len(small_frames) + 1)
+    if request.param == "db3":
+        return write_realsense_recording(folder / "rec.db3", small_frames), numbers * 0.0333
+    return write_realsense_bag(folder / "rec.bag", small_frames), numbers / 30.0
 
 
 def _device_depth(depth: np.ndarray) -> np.ndarray:
@@ -44,8 +53,9 @@ def _device_depth(depth: np.ndarray) -> np.ndarray:
 
 
 def test_a_recording_reads_back_identical_depth_colour_camera_and_scale(
-    recording: Path, small_frames: list
+    recording: tuple[Path, np.ndarray], small_frames: list
 ) -> None:
+    recording, times = recording
     assert recording_format(recording) == "realsense"
     sequence = open_sequence(DataConfig(path=str(recording)))  # detected: realsense
     assert type(sequence).__name__ == "RealSenseRecording"
@@ -56,7 +66,7 @@ def test_a_recording_reads_back_identical_depth_colour_camera_and_scale(
     theirs = (expected.fx, expected.fy, expected.cx, expected.cy)
     assert mine == pytest.approx(theirs, rel=1e-6)  # the SDK stores float32
     assert sequence.depth_scale == pytest.approx(1.0 / REALSENSE_DEPTH_UNITS, rel=1e-6)
-    np.testing.assert_allclose(sequence.timestamps(), 0.0333 * np.arange(1, 6), atol=1e-9)
+    np.testing.assert_allclose(sequence.timestamps(), times, atol=1e-6)
     assert sequence.gt_poses() is None
     for index in (len(sequence) - 1, 0, 1, 3):  # the last first, then back: a restart
         frame, original = sequence[index], small_frames[index]
