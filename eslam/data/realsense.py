@@ -355,8 +355,8 @@ def parse_source(text: str) -> str | None:
     Raises:
         ConfigError: not a RealSense source.
     """
-    name, _, serial = text.partition(":")
-    if name != LIVE_NAME or (_ and not serial):
+    name, colon, serial = text.partition(":")
+    if name != LIVE_NAME or (colon and not serial):
         raise ConfigError(f"--source must be realsense or realsense:SERIAL, got '{text}'")
     return serial or None
 
