@@ -30,6 +30,7 @@ from eslam.config import DataConfig
 from eslam.data.bags import open_bag
 from eslam.data.base import FrameReading
 from eslam.data.ros_messages import (
+    DEPTH_ENCODINGS,
     POSE_TYPES,
     camera_model,
     colour_image,
@@ -166,8 +167,7 @@ class RosbagSequence:
         self._frames = [(colour[i], depth[j]) for i, j in pairs]
         self._times = np.array([c.stamp for c, _ in self._frames], dtype=np.float64) / 1e9
         camera = camera_model(self._first(self.topics["camera_info"]), self._where("camera_info"))
-        per_metre = {"16UC1": 1000.0, "mono16": 1000.0, "32FC1": 1.0}[encodings]
-        self.depth_scale = options.depth_scale or per_metre
+        self.depth_scale = options.depth_scale or DEPTH_ENCODINGS[encodings][1]
         prepare = None
         if camera.distortion is not None:
             prepare = Undistorter(camera.intrinsics, camera.distortion).images
@@ -188,13 +188,16 @@ class RosbagSequence:
         return f"{self.root} [{self.topics[role]}{at}]"
 
     def _image_kind(self, topic: str) -> str | None:
-        message = self._first(topic)
+        """'colour' or 'depth' by the topic's first encoding; None when empty or unread."""
+        message = self._first(topic, required=False)
         return image_kind(str(message.encoding)) if message is not None else None
 
-    def _first(self, topic: str):
+    def _first(self, topic: str, required: bool = True):
         for connection, _, raw in self._reader.messages(connections=self._connections[topic]):
             return self._reader.deserialize(raw, connection.msgtype)
-        raise InputError(self.root, f"topic {topic} holds no message", "check data.topics")
+        if required:
+            raise InputError(self.root, f"topic {topic} holds no message", "check data.topics")
+        return None
 
     def _choose(
         self,
