@@ -171,7 +171,7 @@ def _command_run(args: argparse.Namespace) -> int:
     if args.source is not None:
         from eslam.data.realsense import open_camera
 
-        source = open_camera(args.source, args.camera_size, args.camera_fps, args.data)
+        source = open_camera(args.source, args.camera_size, args.camera_fps, config.data)
     try:
         _print_metrics(run_slam(config, out, overwrite=args.overwrite, source=source))
     finally:

@@ -372,6 +372,7 @@ class RealSenseCamera:
         serial: the camera's serial number; None = the only camera attached.
         size: (width, height) of both streams.
         fps: frames per second of both streams.
+        options: the ``data`` config section: resize and crop apply to the frames.
 
     Raises:
         ConfigError: pyrealsense2 is missing.
@@ -380,8 +381,13 @@ class RealSenseCamera:
     """
 
     def __init__(
-        self, serial: str | None = None, size: tuple[int, int] = (640, 480), fps: int = 30
+        self,
+        serial: str | None = None,
+        size: tuple[int, int] = (640, 480),
+        fps: int = 30,
+        options: DataConfig | None = None,
     ) -> None:
+        options = options or DataConfig()
         rs = import_pyrealsense2()
         self.rs = rs
         self.name = LIVE_NAME if serial is None else f"{LIVE_NAME}:{serial}"
@@ -419,7 +425,10 @@ class RealSenseCamera:
         prepare = None
         if camera.distortion is not None:
             prepare = Undistorter(camera.intrinsics, camera.distortion).images
-        self._reading = FrameReading(camera.intrinsics, self.depth_scale, prepare=prepare)
+        transform = transform_from_options(options.resize, options.crop)
+        self._reading = FrameReading(
+            camera.intrinsics, self.depth_scale, transform, prepare=prepare
+        )
         self.intrinsics = self._reading.intrinsics
         self._align = rs.align(rs.stream.color)
 
@@ -455,16 +464,17 @@ class RealSenseCamera:
             self._pipeline.stop()
 
 
-def open_camera(
-    spec: str, size: tuple[int, int], fps: int, data: str | None = None
-) -> RealSenseCamera:
-    """The live camera ``eslam run --source realsense[:SERIAL]`` names.
+def open_camera(spec: str, size: tuple[int, int], fps: int, options: DataConfig) -> RealSenseCamera:
+    """The live camera ``eslam run --source realsense[:SERIAL]`` names (``options``:
+    the run's ``data`` section, whose path must be unset; its resize and crop apply).
 
     Raises:
         ConfigError: not a RealSense source, or --data given as well.
         InputError: no such camera (:class:`RealSenseCamera`).
     """
     serial = parse_source(spec)
-    if data is not None:
-        raise ConfigError("--source and --data exclude each other: pass one input")
-    return RealSenseCamera(serial, size, fps)
+    if options.path is not None:
+        raise ConfigError(
+            f"--source {spec} and data.path={options.path} exclude each other: pass one input"
+        )
+    return RealSenseCamera(serial, size, fps, options)

@@ -113,6 +113,9 @@ def test_without_a_camera_eslam_run_source_fails_in_one_line(
     assert not out.exists()
     assert main(["run", "demo", "--source", "kinect", "--out", str(out)]) == 2
     assert "--source must be realsense or realsense:SERIAL" in capsys.readouterr().err
+    both = ["run", "demo", "--source", "realsense", "--data", str(tmp_path), "--out", str(out)]
+    assert main(both) == 2
+    assert "exclude each other" in capsys.readouterr().err and not out.exists()
 
 
 def test_without_pyrealsense2_the_error_names_the_extra_and_libusb(
