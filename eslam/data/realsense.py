@@ -101,7 +101,10 @@ def _registered(rs, depth_profile, colour_profile) -> bool:
         getattr(depth, name) == getattr(colour, name)
         for name in ("width", "height", "fx", "fy", "ppx", "ppy")
     ) and list(depth.coeffs) == list(colour.coeffs)
-    extrinsics = depth_profile.get_extrinsics_to(colour_profile)
+    try:
+        extrinsics = depth_profile.get_extrinsics_to(colour_profile)
+    except RuntimeError:  # none recorded: rs.align decides what it can do
+        return False
     identity = np.allclose(np.reshape(extrinsics.rotation, (3, 3)), np.eye(3)) and np.allclose(
         extrinsics.translation, 0.0
     )
@@ -112,7 +115,8 @@ PAIR_TOLERANCE_S = 0.02
 """Largest time difference of a colour and a depth frame paired into one frame, s."""
 
 ARRIVAL_QUEUE = 8
-"""Framesets the playback may run ahead of the reader (it waits while they are unread)."""
+"""Framesets the playback may run ahead of the reader (it waits while they are unread).
+Below the SDK's frame pool of 16 per stream: with 16 queued, later frames were dropped."""
 
 END_GRACE_S = 0.2
 """How long to wait for a last frame after the playback reports it stopped, s."""
