@@ -169,7 +169,16 @@ def _command_run(args: argparse.Namespace) -> int:
     config = load_config(args.config, overrides)
     out = Path(args.out) if args.out else Path(default_run_name(args.config))
     _process_settings(config)
-    _print_metrics(run_slam(config, out, overwrite=args.overwrite))
+    source = None
+    if args.source is not None:
+        from eslam.data.realsense import open_camera
+
+        source = open_camera(args.source, args.camera_size, args.camera_fps, config.data)
+    try:
+        _print_metrics(run_slam(config, out, overwrite=args.overwrite, source=source))
+    finally:
+        if source is not None:
+            source.close()
     return 0
 
 
@@ -570,6 +579,18 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="drop frames that arrive while busy, keep the newest; replay a recording at its "
         "recorded rate (sets data.realtime; always on for a live camera; docs/realtime.md)",
+    )
+    run.add_argument(
+        "--source",
+        metavar="realsense[:SERIAL]",
+        help="a live RealSense camera instead of --data (docs/live.md; the realsense extra)",
+    )
+    run.add_argument(
+        "--camera-size", type=_image_size, default=(640, 480), metavar="WxH",
+        help="live camera: depth and colour size (default 640x480)",
+    )  # fmt: skip
+    run.add_argument(
+        "--camera-fps", type=_positive_int, default=30, help="live camera: frame rate (30)"
     )
     run.set_defaults(handler=_command_run)
 

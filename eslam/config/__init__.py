@@ -24,6 +24,7 @@ from eslam.config.schema import (
     RenderTrackerConfig,
     SceneConfig,
     SdfTrackerConfig,
+    TopicsConfig,
     TrackingConfig,
 )
 
@@ -43,6 +44,7 @@ __all__ = [
     "RenderTrackerConfig",
     "SceneConfig",
     "SdfTrackerConfig",
+    "TopicsConfig",
     "TrackingConfig",
     "config_from_dict",
     "config_help",

@@ -23,13 +23,36 @@ def _at_least(section: object, name: str, least: int) -> None:
 
 
 @dataclass
+class TopicsConfig:
+    """Topics of a ROS bag (``data.format: rosbag``, docs/live.md); null = automatic."""
+
+    colour: str | None = None
+    """sensor_msgs/Image colour topic; null = /camera/color/image_raw, else the bag's only
+    colour image topic."""
+    depth: str | None = None
+    """sensor_msgs/Image depth topic (16UC1/mono16 mm, 32FC1 m); null =
+    /camera/aligned_depth_to_color/image_raw, else the bag's only depth image topic."""
+    camera_info: str | None = None
+    """sensor_msgs/CameraInfo of the colour camera; null = /camera/color/camera_info, else
+    the bag's only CameraInfo topic."""
+    pose: str | None = None
+    """Ground-truth camera pose topic (geometry_msgs/PoseStamped, nav_msgs/Odometry or
+    tf2_msgs/TFMessage) of the camera's optical frame; null = no ground truth."""
+    pose_frames: tuple[str, str] | None = None
+    """TF pose topics only: [parent, child] frame ids of the transform to read; null =
+    the topic's only transform."""
+
+
+@dataclass
 class DataConfig:
     """Which sequence to read and how it is laid out on disk."""
 
     format: str = "replica"
-    """Dataset layout of the sequence folder (e.g. replica); checked by the data layer."""
+    """Dataset layout of the sequence folder (e.g. replica, folder, redwood) or recording
+    (rosbag, realsense); when data.path is a recording (.bag, .db3, .mcap, a ROS 2 bag
+    folder) and this names a folder layout, the recording's format is detected."""
     path: str | None = None
-    """Folder of the sequence; `--data PATH` on the command line sets it."""
+    """Folder or recording of the sequence; `--data PATH` on the command line sets it."""
     start: int = 0
     """First frame to use (0-based position in the folder's frame order); `--start`."""
     stride: int = 1
@@ -65,6 +88,8 @@ class DataConfig:
     replay_fps: float | None = None
     """Real-time replay of a recording: release frames at this rate; null = at their
     timestamps (needed when the timestamps are frame numbers, e.g. Replica folders)."""
+    topics: TopicsConfig = field(default_factory=TopicsConfig)
+    """Topics read from a ROS bag (data.format: rosbag)."""
 
     def __post_init__(self) -> None:
         if self.start < 0:

@@ -11,10 +11,14 @@ from collections.abc import Callable
 from pathlib import Path
 
 from eslam.config import DataConfig
+from eslam.data.bags import effective_format
 from eslam.data.base import RGBDSequence, iterate_frames
 from eslam.data.depth_resolution import DepthDownsampled
 from eslam.data.folder import FolderSequence
+from eslam.data.realsense import RealSenseRecording
+from eslam.data.redwood import RedwoodSequence
 from eslam.data.replica import ReplicaSequence
+from eslam.data.rosbag import RosbagSequence
 from eslam.data.scannet import ScanNetSequence
 from eslam.data.selection import FrameSelection, sequence_timestamps
 from eslam.data.sevenscenes import SevenScenesSequence
@@ -27,6 +31,9 @@ DATASETS: dict[str, Callable[[Path, DataConfig], RGBDSequence]] = {
     "tum": TUMSequence,
     "sevenscenes": SevenScenesSequence,
     "folder": FolderSequence,
+    "redwood": RedwoodSequence,
+    "rosbag": RosbagSequence,
+    "realsense": RealSenseRecording,
 }
 """Reader of each supported layout, by the name ``data.format`` takes."""
 
@@ -51,8 +58,9 @@ def open_sequence(options: DataConfig) -> RGBDSequence:
 
 
 def open_all_frames(options: DataConfig) -> RGBDSequence:
-    """Open every frame of ``options.path`` with the reader of ``options.format``."""
-    format_name = options.format
+    """Open every frame of ``options.path`` with the reader of ``options.format`` (a
+    recording's own format when the path is one: :func:`~eslam.data.bags.effective_format`)."""
+    format_name = effective_format(options.format, options.path)
     try:
         reader = DATASETS[format_name]
     except KeyError:
@@ -67,6 +75,7 @@ __all__ = [
     "DATASETS",
     "FrameSelection",
     "RGBDSequence",
+    "effective_format",
     "iterate_frames",
     "open_all_frames",
     "open_sequence",

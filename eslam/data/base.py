@@ -213,13 +213,38 @@ class FrameReading:
             InputError: unreadable image, wrong size, or depth that cannot be metres.
         """
         colour_path, depth_path = files
-        raw = self.raw_intrinsics
         rgb = read_rgb(colour_path)
+        units = read_depth(depth_path, 1.0)
+        return self.build(index, (rgb, units), pose, timestamp, files)
+
+    def build(
+        self,
+        index: int,
+        images: tuple[np.ndarray, np.ndarray],
+        pose: np.ndarray | None,
+        timestamp: float,
+        where: tuple[str | Path, str | Path],
+    ) -> Frame:
+        """Check and transform one frame's decoded images (files or recorded messages).
+
+        Args:
+            index: the frame's position in its sequence.
+            images: (H, W, 3) uint8 colour and (H, W) float32 depth in file units
+                (metres = units / depth_scale, 0 = invalid).
+            pose: (4, 4) ground-truth camera-to-world, or None / a NaN matrix for none.
+            timestamp: seconds, or the frame number.
+            where: what to name in errors about the colour and the depth image.
+
+        Raises:
+            InputError: wrong size, or depth that cannot be metres.
+        """
+        rgb, units = images
+        colour_path, depth_path = Path(where[0]), Path(where[1])
+        raw = self.raw_intrinsics
         if self.colour_any_size:
             rgb = ImageTransform(raw.size).colour(rgb)
         else:
             check_image_size(colour_path, rgb.shape, raw)
-        units = read_depth(depth_path, 1.0)
         check_image_size(depth_path, units.shape, raw)
         if self.invalid_depth is not None:
             units[units == self.invalid_depth] = 0.0

@@ -70,6 +70,8 @@ def _stamp(path: Path, root: Path) -> FileStamp:
         name = path.relative_to(root).as_posix()
     except ValueError:
         name = path.name
+    if name == ".":  # a recording: the file holds every frame
+        name = path.name
     try:
         size = path.stat().st_size
     except OSError:

@@ -19,6 +19,7 @@ the completed frames are checkpointed, and the error says how to resume.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import logging
 import time
 from collections.abc import Iterable, Iterator, Sequence
@@ -31,6 +32,7 @@ import torch
 from eslam.config import ESLAMConfig
 from eslam.config.device import resolve_device
 from eslam.data import RGBDSequence, open_sequence
+from eslam.data.bags import with_detected_format
 from eslam.data.depth_units import DepthCheck, sequence_depth_file, sequence_depth_scale
 from eslam.data.feed import is_live, open_feed, runs_in_real_time
 from eslam.data.prefetch import close_iterator
@@ -516,6 +518,7 @@ def run_slam(
     """
     device = resolve_device(config.device)
     config = absolute_data_path(config)
+    config = dataclasses.replace(config, data=with_detected_format(config.data))
     if resume:
         check_resumable(config, source, Path(run_dir))
     source, sequence = _open_input(config, source)

@@ -161,3 +161,12 @@ def test_a_real_time_read_error_comes_after_the_waiting_frame() -> None:
             next(reader)
     assert raised.value is bad
     assert no_feed_threads()
+
+
+def test_a_live_realsense_camera_always_runs_in_real_time():
+    from eslam.config import DataConfig
+    from eslam.data.feed import runs_in_real_time
+    from eslam.data.realsense import RealSenseCamera
+
+    assert RealSenseCamera.live
+    assert runs_in_real_time(RealSenseCamera, DataConfig(realtime=False))
