@@ -7,6 +7,7 @@ arguments, calls it and turns user errors into one line on stderr with exit stat
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import signal
 import sys
@@ -167,7 +168,13 @@ def _command_run(args: argparse.Namespace) -> int:
     config = load_config(args.config, overrides)
     out = Path(args.out) if args.out else Path(default_run_name(args.config))
     _process_settings(config)
-    _print_metrics(run_slam(config, out, overwrite=args.overwrite))
+    viewer = contextlib.nullcontext([])  # no viewer: nothing of it imported
+    if args.viewer is not None or args.viewer_save is not None:
+        from eslam.workflows.live_viewer import viewer_observers
+
+        viewer = viewer_observers(config, out, args.viewer, args.viewer_save)
+    with viewer as observers:
+        _print_metrics(run_slam(config, out, overwrite=args.overwrite, observers=observers))
     return 0
 
 
@@ -556,6 +563,15 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--stride", type=int, help="use every N-th frame (sets data.stride)")
     run.add_argument("--max-frames", type=int, help="use at most N frames (sets data.max_frames)")
     run.add_argument("--overwrite", action="store_true", help="reuse an existing run folder")
+    run.add_argument(
+        "--viewer",
+        choices=("rerun", "rerun-web"),
+        help="show the run live: rerun = a rerun viewer here; rerun-web = served to a "
+        "browser (ports 9090 and 9876); needs the [viewer] extra (docs/live.md)",
+    )
+    run.add_argument(
+        "--viewer-save", type=Path, metavar="FILE.rrd", help="record the viewer's stream to a file"
+    )
     run.set_defaults(handler=_command_run)
 
     configs = commands.add_parser(

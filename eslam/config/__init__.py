@@ -25,6 +25,7 @@ from eslam.config.schema import (
     SceneConfig,
     SdfTrackerConfig,
     TrackingConfig,
+    ViewerConfig,
 )
 
 __all__ = [
@@ -44,6 +45,7 @@ __all__ = [
     "SceneConfig",
     "SdfTrackerConfig",
     "TrackingConfig",
+    "ViewerConfig",
     "config_from_dict",
     "config_help",
     "config_to_dict",

@@ -253,6 +253,7 @@ class RunLoop:
             mapped=mapped,
             tracking_s=done_tracking - started,
             mapping_s=done - done_tracking,
+            frame=frame,
         )
 
     def _create_field(self, frame: Frame, has_depth: bool, pose: torch.Tensor) -> None:
