@@ -37,17 +37,34 @@ def look_at_opencv(position: np.ndarray, target: np.ndarray, up: np.ndarray) -> 
     return pose
 
 
+SPREAD_YAW = 0.05
+"""Second-smallest eigenvalue of the cameras' mean x x^T above which their x axes span a
+plane (the camera turned) and the up direction is that plane's normal."""
+
+
 def mean_up(poses: np.ndarray) -> np.ndarray:
-    """(3,) unit world direction the cameras held as "up": the normalised mean of their
-    -y axes (OpenCV's y points down the image), over the finite poses of (N, 4, 4)."""
+    """(3,) unit world direction the cameras held as "up", from (N, 4, 4) poses (finite
+    ones only).
+
+    A camera without roll keeps its x axis (image right) horizontal, whatever its pitch:
+    when the x axes of the cameras span a plane (the camera turned; the second-smallest
+    eigenvalue of mean x x^T exceeds :data:`SPREAD_YAW`), up is that plane's normal, the
+    eigenvector of the smallest eigenvalue. Otherwise (one heading only) it is the mean
+    of the cameras' -y axes (OpenCV's y points down the image), tilted by their pitch.
+    Either way the sign agrees with that mean.
+    """
     finite = poses[np.isfinite(poses).all(axis=(1, 2))]
     if len(finite) == 0:
         raise ValueError("no finite pose to find the up direction from")
-    up = -finite[:, :3, 1].mean(axis=0)
+    image_up = -finite[:, :3, 1].mean(axis=0)
+    rights = finite[:, :3, 0]
+    values, vectors = np.linalg.eigh(rights.T @ rights / len(rights))
+    up = vectors[:, 0] if values[1] > SPREAD_YAW else image_up
     norm = np.linalg.norm(up)
     if norm < 1e-6:
         raise ValueError("the cameras' up directions cancel out")
-    return up / norm
+    up = up / norm
+    return up if np.dot(up, image_up) >= 0 else -up
 
 
 def orbit_poses(bound: np.ndarray, poses: np.ndarray, count: int) -> np.ndarray:
