@@ -24,6 +24,8 @@ What is logged, on the ``frame`` timeline (entity paths):
 from __future__ import annotations
 
 import contextlib
+import logging
+import os
 import sys
 import uuid
 from collections.abc import Mapping
@@ -36,6 +38,8 @@ from eslam.atomic import atomic_path
 from eslam.errors import ConfigError
 from eslam.types import Intrinsics, TriangleMesh
 
+log = logging.getLogger("eslam")
+
 TESTED_RERUN = "0.41"
 """The rerun-sdk minor version this module is written and tested against."""
 INSTALL = 'pip install "eslam[viewer]"'
@@ -44,6 +48,8 @@ JPEG_QUALITY = 85
 """JPEG quality of the logged colour images (a tenth of the raw size at 640x480)."""
 TIMELINE = "frame"
 """The timeline everything is logged on: the frame's index in the run."""
+FLUSH_TIMEOUT_S = 60.0
+"""Longest wait for the stream to drain when the run ends, seconds."""
 ESTIMATE_COLOUR = (230, 60, 60)
 GROUND_TRUTH_COLOUR = (40, 40, 40)
 
@@ -178,12 +184,25 @@ class RerunSink:
             self.files.__exit__(RuntimeError, never, None)  # removes the temporary .rrd
 
     def close(self, complete: bool) -> None:
-        """Flush the stream; publish the .rrd (complete or not: it holds what happened)."""
+        """Flush the stream; publish the .rrd (complete or not: it holds what happened).
+
+        A viewer that went away (closed, or never able to start) costs its stream, never
+        the run: a warning says so.
+        """
         try:
-            self.recording.flush()
-            self.recording.disconnect()
+            self.recording.flush(timeout_sec=FLUSH_TIMEOUT_S)
+        except RuntimeError as error:
+            log.warning("the viewer's stream was lost (the run is unaffected): %s", error)
         finally:
-            self.files.close()
+            try:
+                self.recording.disconnect()
+            finally:
+                self.files.close()
+
+
+def has_display(environment: Mapping[str, str]) -> bool:
+    """Whether a window can open on Linux: an X11 or Wayland display is set."""
+    return bool(environment.get("DISPLAY") or environment.get("WAYLAND_DISPLAY"))
 
 
 def open_rerun_sink(name: str, outputs: ViewerOutputs, say=print) -> RerunSink:
@@ -196,6 +215,12 @@ def open_rerun_sink(name: str, outputs: ViewerOutputs, say=print) -> RerunSink:
     Raises:
         ConfigError: rerun is missing or of another version, or a port cannot be used.
     """
+    if outputs.spawn and sys.platform.startswith("linux") and not has_display(os.environ):
+        raise ConfigError(
+            "--viewer rerun opens a window, but there is no display (DISPLAY and "
+            "WAYLAND_DISPLAY are unset): use --viewer rerun-web and a browser, or "
+            "--viewer-save FILE.rrd and open it later with `rerun FILE.rrd`"
+        )
     rr = import_rerun()
     recording = rr.RecordingStream("eslam", recording_id=f"{name}-{uuid.uuid4().hex[:8]}")
     files = contextlib.ExitStack()
@@ -209,13 +234,12 @@ def open_rerun_sink(name: str, outputs: ViewerOutputs, say=print) -> RerunSink:
         if outputs.serve:
             server = rr.GrpcServerSink(port=outputs.grpc_port, server_memory_limit="25%")
             sinks.append(server)
+            url = f"rerun+http://localhost:{outputs.grpc_port}/proxy"
         recording.set_sinks(*sinks)
         if outputs.serve:
-            rr.serve_web_viewer(
-                web_port=outputs.web_port, open_browser=False, connect_to=server.uri
-            )
+            rr.serve_web_viewer(web_port=outputs.web_port, open_browser=False, connect_to=url)
             say(
-                f"viewer: open http://localhost:{outputs.web_port}/?url={server.uri} "
+                f"viewer: open http://localhost:{outputs.web_port}/?url={url} "
                 f"(from another machine: forward ports {outputs.web_port} and "
                 f"{outputs.grpc_port}, e.g. ssh -L {outputs.web_port}:localhost:"
                 f"{outputs.web_port} -L {outputs.grpc_port}:localhost:{outputs.grpc_port})"

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from eslam.cli import main
+from eslam.cli import EXIT_USER_ERROR, main
 from eslam.io.trajectory import read_tum_trajectory
 from eslam.synthetic import SynthConfig, read_synthetic_bound, write_synthetic_sequence
 from eslam.workflows.demo import DEMO_CONFIG
@@ -109,3 +109,26 @@ def test_recording_holds_the_run_poses_images_mesh_and_scalars(
     losses = column(table, "/scalars/mapping/loss", "Scalars:scalars")
     assert all(np.isfinite(loss) for loss in losses if loss is not None)
     assert column(table, "/scalars/time/tracking_ms", "Scalars:scalars")[1] > 0
+
+
+def test_a_spawned_viewer_without_a_display_is_refused_before_the_run(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    monkeypatch.setattr("sys.platform", "linux")
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    out = tmp_path / "run"
+    argv = [
+        "run",
+        str(DEMO_CONFIG),
+        "--data",
+        str(tmp_path),
+        "--out",
+        str(out),
+        "--viewer",
+        "rerun",
+    ]
+    assert main(argv) == EXIT_USER_ERROR
+    err = capsys.readouterr().err
+    assert "no display" in err and "--viewer rerun-web" in err and len(err.splitlines()) == 1
+    assert not out.exists()
