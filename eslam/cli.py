@@ -168,14 +168,31 @@ def _command_run(args: argparse.Namespace) -> int:
     config = load_config(args.config, overrides)
     out = Path(args.out) if args.out else Path(default_run_name(args.config))
     _process_settings(config)
-    viewer = contextlib.nullcontext([])  # no viewer: nothing of it imported
-    if args.viewer is not None or args.viewer_save is not None:
-        from eslam.workflows.live_viewer import viewer_observers
-
-        viewer = viewer_observers(config, out, args.viewer, args.viewer_save)
-    with viewer as observers:
+    with _viewer(args, config, out) as observers:
         _print_metrics(run_slam(config, out, overwrite=args.overwrite, observers=observers))
     return 0
+
+
+def _viewer(args: argparse.Namespace, config, run_dir: Path):
+    """The live viewer's observers (``--viewer``, ``--viewer-save``) as a context; without
+    those options none, and nothing of the viewer is imported."""
+    if args.viewer is None and args.viewer_save is None:
+        return contextlib.nullcontext([])
+    from eslam.workflows.live_viewer import viewer_observers
+
+    return viewer_observers(config, run_dir, args.viewer, args.viewer_save)
+
+
+def _add_viewer_options(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--viewer",
+        choices=("rerun", "rerun-web"),
+        help="show the run live: rerun = a rerun viewer here; rerun-web = served to a "
+        "browser (ports 9090 and 9876); needs the [viewer] extra (docs/live.md)",
+    )
+    parser.add_argument(
+        "--viewer-save", type=Path, metavar="FILE.rrd", help="record the viewer's stream to a file"
+    )
 
 
 def _command_configs(args: argparse.Namespace) -> int:
@@ -211,7 +228,8 @@ def _command_resume(args: argparse.Namespace) -> int:
         data = dataclasses.replace(config.data, path=os.path.abspath(args.data))
         config = dataclasses.replace(config, data=data)
     _process_settings(config)
-    _print_metrics(run_slam(config, run.root, resume=True))
+    with _viewer(args, config, run.root) as observers:
+        _print_metrics(run_slam(config, run.root, resume=True, observers=observers))
     return 0
 
 
@@ -563,15 +581,7 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--stride", type=int, help="use every N-th frame (sets data.stride)")
     run.add_argument("--max-frames", type=int, help="use at most N frames (sets data.max_frames)")
     run.add_argument("--overwrite", action="store_true", help="reuse an existing run folder")
-    run.add_argument(
-        "--viewer",
-        choices=("rerun", "rerun-web"),
-        help="show the run live: rerun = a rerun viewer here; rerun-web = served to a "
-        "browser (ports 9090 and 9876); needs the [viewer] extra (docs/live.md)",
-    )
-    run.add_argument(
-        "--viewer-save", type=Path, metavar="FILE.rrd", help="record the viewer's stream to a file"
-    )
+    _add_viewer_options(run)
     run.set_defaults(handler=_command_run)
 
     configs = commands.add_parser(
@@ -599,6 +609,7 @@ def build_parser() -> argparse.ArgumentParser:
     resume.add_argument(
         "--data", metavar="PATH", help="the run's sequence, where it moved (sets data.path)"
     )
+    _add_viewer_options(resume)
     resume.set_defaults(handler=_command_resume)
 
     mesh = commands.add_parser(
