@@ -31,7 +31,7 @@ from eslam.render.orbit import orbit_poses
 from eslam.render.renderer import DEFAULT_CHUNK
 from eslam.render.surface import render_novel_view
 from eslam.slam.state import load_state
-from eslam.viz.depth_colours import depth_colours
+from eslam.viz.depth_images import depth_colours, depth_millimetres
 from eslam.workflows.progress import StageProgress
 
 DEFAULT_ORBIT_VIEWS = 120
@@ -98,13 +98,6 @@ class RenderResult:
     seconds: float
 
 
-def depth_png(depth: np.ndarray) -> np.ndarray:
-    """(H, W) uint16 millimetres of ``depth`` (H, W) metres: round(1000 d), 0 where
-    nothing was hit (depth 0 or not finite); depths past 65.535 m are clipped to it."""
-    millimetres = np.round(np.nan_to_num(depth, nan=0.0, posinf=0.0) * 1000.0)
-    return np.clip(millimetres, 0, np.iinfo(np.uint16).max).astype(np.uint16)
-
-
 def _poses(options: RenderOptions, run_poses: np.ndarray, bound: np.ndarray) -> np.ndarray:
     if options.trajectory is not None and options.orbit is not None:
         raise InputError(options.trajectory, "given with an orbit", "pass one of the two")
@@ -166,7 +159,7 @@ def render_run(run_dir: str | Path, options: RenderOptions = RenderOptions()) ->
                     name = f"{position:06d}.png"
                     colour = np.round(255.0 * rgb.clamp(0.0, 1.0).cpu().numpy()).astype(np.uint8)
                     Image.fromarray(colour).save(staging / "colour" / name)
-                    Image.fromarray(depth_png(depth_np)).save(staging / "depth" / name)
+                    Image.fromarray(depth_millimetres(depth_np)).save(staging / "depth" / name)
                     written.append(name)
                     hits = depth_np[depth_np > 0]
                     if len(hits):

@@ -9,7 +9,7 @@ from eslam.config import RenderConfig
 from eslam.render.orbit import look_at_opencv, mean_up, orbit_poses
 from eslam.render.surface import first_zero_crossing, render_novel_view
 from eslam.types import FieldOutput, Intrinsics
-from eslam.viz.depth_colours import turbo
+from eslam.viz.depth_images import turbo
 
 
 class PlaneField:

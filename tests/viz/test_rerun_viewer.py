@@ -10,8 +10,11 @@ import pytest
 from PIL import Image
 
 from eslam.cli import EXIT_USER_ERROR, main
+from eslam.config import DataConfig
+from eslam.data import open_sequence
 from eslam.io.trajectory import read_tum_trajectory
 from eslam.synthetic import SynthConfig, read_synthetic_bound, write_synthetic_sequence
+from eslam.viz.depth_images import depth_millimetres
 from eslam.workflows.demo import DEMO_CONFIG
 
 rr = pytest.importorskip("rerun", reason="the [viewer] extra (rerun-sdk) is not installed")
@@ -95,13 +98,17 @@ def test_recording_holds_the_run_poses_images_mesh_and_scalars(
         assert Image.open(io.BytesIO(bytes(blob))).size == (WIDTH, HEIGHT)
     depth_sizes = column(table, "/world/camera/image/depth", "DepthImage:format")
     assert all((f["width"], f["height"]) == (WIDTH, HEIGHT) for f in depth_sizes)
+    sequence = open_sequence(DataConfig(path=str(run_dir.parent / "data")))
+    for index, buffer in enumerate(column(table, "/world/camera/image/depth", "DepthImage:buffer")):
+        logged = np.frombuffer(bytes(buffer), dtype=np.uint16).reshape(HEIGHT, WIDTH)
+        np.testing.assert_array_equal(logged, depth_millimetres(sequence[index].depth))
 
     # rendered every 2nd frame at half size; the mesh at every keyframe (frames 0 and 2)
     rendered = column(table, "/rendered/depth", "DepthImage:format")
     assert [f is not None for f in rendered] == [True, False, True]
     assert all((f["width"], f["height"]) == (WIDTH // 2, HEIGHT // 2) for f in rendered if f)
     buffer = column(table, "/rendered/depth", "DepthImage:buffer")[2]
-    depth = np.frombuffer(bytes(buffer), dtype=np.float32)
+    depth = np.frombuffer(bytes(buffer), dtype=np.uint16)  # millimetres
     assert (depth > 0).mean() > 0.9, "the map's surface is hit"
     meshes = table["/world/mesh:Mesh3D:vertex_positions"].tolist()
     assert [m is not None for m in meshes] == [True, False, True]

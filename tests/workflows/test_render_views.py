@@ -14,7 +14,8 @@ from eslam.data import open_sequence
 from eslam.io.trajectory import write_tum_trajectory
 from eslam.synthetic import SynthConfig
 from eslam.synthetic.sequence import SyntheticSequence
-from eslam.workflows.render_views import depth_png, video_panel
+from eslam.viz.depth_images import depth_millimetres
+from eslam.workflows.render_views import video_panel
 
 GT_FRAMES = [0, 6, 11]
 """Frames of the tiny sequence whose ground-truth poses are rendered."""
@@ -92,9 +93,9 @@ def test_bad_run_folder_or_trajectory_is_one_line_exit_2(
     assert stop.value.code == EXIT_USER_ERROR
 
 
-def test_depth_png_is_millimetres_with_zero_for_nothing_hit() -> None:
+def test_depth_images_are_millimetres_with_zero_for_nothing_hit() -> None:
     depth = np.array([[0.0, 1.2344], [np.nan, 70.0]], dtype=np.float32)
-    assert depth_png(depth).tolist() == [[0, 1234], [0, 65535]]
+    assert depth_millimetres(depth).tolist() == [[0, 1234], [0, 65535]]
 
 
 def test_video_panel_puts_depth_beside_colour_with_even_sides() -> None:

@@ -1,8 +1,9 @@
-"""Depth as colour for videos: the Turbo colour map, without matplotlib.
+"""Depth as images: 16-bit millimetres (PNG files, the viewer's stream) and colours (videos).
 
-Turbo (Mikhailov, "Turbo, an improved rainbow colormap for visualization", Google AI
-blog, 2019) through its degree-5 polynomial approximation (Ruofei Du's, published with
-it): each channel c(x) = sum_k a_k x^k, k = 0..5, x in [0, 1], clipped to [0, 1].
+The colours are Turbo (Mikhailov, "Turbo, an improved rainbow colormap for
+visualization", Google AI blog, 2019), without matplotlib, through its degree-5
+polynomial approximation (Ruofei Du's, published with it): each channel
+c(x) = sum_k a_k x^k, k = 0..5, x in [0, 1], clipped to [0, 1].
 """
 
 from __future__ import annotations
@@ -35,3 +36,11 @@ def depth_colours(depth: np.ndarray, near: float, far: float) -> np.ndarray:
     colours = turbo((depth - near) / (far - near))
     colours[~(depth > 0)] = 0
     return colours
+
+
+def depth_millimetres(depth: np.ndarray) -> np.ndarray:
+    """(H, W) uint16 millimetres of ``depth`` (H, W) metres: round(1000 d), 0 where
+    nothing was measured or hit (depth 0 or not finite); depths past 65.535 m are
+    clipped to it (the format's largest)."""
+    millimetres = np.round(np.nan_to_num(depth, nan=0.0, posinf=0.0, neginf=0.0) * 1000.0)
+    return np.clip(millimetres, 0, np.iinfo(np.uint16).max).astype(np.uint16)
