@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -106,3 +107,16 @@ def test_video_panel_puts_depth_beside_colour_with_even_sides() -> None:
     assert (panel[:5, :3] == 200).all() and (panel[:5, 3] == 0).all(), "no depth: black"
     near, far = panel[0, 4], panel[0, 5]
     assert near[2] > near[0] and far[0] > far[2], "Turbo: blue near, red far"
+
+
+def test_an_orbit_without_ffmpeg_writes_images_and_says_why_there_is_no_video(
+    tiny_run, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    monkeypatch.setitem(sys.modules, "imageio_ffmpeg", None)  # import fails
+    out = tmp_path / "orbit"
+    argv = ["render", str(tiny_run.run_dir), "--orbit", "3", "--size", "8x8", "--out", str(out)]
+    assert main(argv) == 0
+    printed = capsys.readouterr().out
+    assert "wrote 3 views (8x8)" in printed
+    assert 'no video: imageio-ffmpeg is not installed (pip install "eslam[viewer]")' in printed
+    assert len(list((out / "colour").iterdir())) == 3 and not (out / "video.mp4").exists()
