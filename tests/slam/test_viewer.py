@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -111,3 +113,20 @@ def test_nothing_is_rendered_or_meshed_when_switched_off(tiny_sequence: Path, ti
     assert not sink.of("rendered") and not sink.of("mesh")
     assert sink.of("camera")[0][3:] == (None, None), "a frame without images shows none"
     assert sink.calls[-1] == ("close", False)
+
+
+def test_without_a_viewer_option_nothing_of_the_viewer_is_imported() -> None:
+    """Cost when off: `eslam run` without --viewer / --viewer-save imports no rerun and
+    none of the viewer's modules, and passes no observer."""
+    code = (
+        "import sys, eslam.cli as cli; "
+        "args = cli.build_parser().parse_args(['run', 'demo']); "
+        "observers = cli._viewer(args, None, None).__enter__(); "
+        "names = ('rerun', 'eslam.slam.viewer', 'eslam.viz.rerun_viewer', "
+        "'eslam.workflows.live_viewer'); "
+        "print(observers, sorted(m for m in names if m in sys.modules))"
+    )
+    result = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True, timeout=120
+    )
+    assert result.stdout.strip() == "[] []"
