@@ -119,8 +119,8 @@ def test_without_a_viewer_option_nothing_of_the_viewer_is_imported() -> None:
     """Cost when off: `eslam run` without --viewer / --viewer-save imports no rerun and
     none of the viewer's modules, and passes no observer."""
     code = (
-        "import sys, eslam.cli as cli; "
-        "args = cli.build_parser().parse_args(['run', 'demo']); "
+        "import argparse, sys, eslam.cli as cli; "
+        "args = argparse.Namespace(viewer=None, viewer_save=None); "
         "observers = cli._viewer(args, None, None).__enter__(); "
         "names = ('rerun', 'eslam.slam.viewer', 'eslam.viz.rerun_viewer', "
         "'eslam.workflows.live_viewer'); "
