@@ -7,6 +7,7 @@ arguments, calls it and turns user errors into one line on stderr with exit stat
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import signal
 import sys
@@ -175,11 +176,37 @@ def _command_run(args: argparse.Namespace) -> int:
 
         source = open_camera(args.source, args.camera_size, args.camera_fps, config.data)
     try:
-        _print_metrics(run_slam(config, out, overwrite=args.overwrite, source=source))
+        with _viewer(args, config, out) as observers:
+            result = run_slam(
+                config, out, overwrite=args.overwrite, source=source, observers=observers
+            )
+        _print_metrics(result)
     finally:
         if source is not None:
             source.close()
     return 0
+
+
+def _viewer(args: argparse.Namespace, config, run_dir: Path):
+    """The live viewer's observers (``--viewer``, ``--viewer-save``) as a context; without
+    those options none, and nothing of the viewer is imported."""
+    if args.viewer is None and args.viewer_save is None:
+        return contextlib.nullcontext([])
+    from eslam.workflows.live_viewer import viewer_observers
+
+    return viewer_observers(config, run_dir, args.viewer, args.viewer_save)
+
+
+def _add_viewer_options(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--viewer",
+        choices=("rerun", "rerun-web"),
+        help="show the run live: rerun = a rerun viewer here; rerun-web = served to a "
+        "browser (ports 9090 and 9876); needs the [viewer] extra (docs/live.md)",
+    )
+    parser.add_argument(
+        "--viewer-save", type=Path, metavar="FILE.rrd", help="record the viewer's stream to a file"
+    )
 
 
 def _command_configs(args: argparse.Namespace) -> int:
@@ -215,7 +242,8 @@ def _command_resume(args: argparse.Namespace) -> int:
         data = dataclasses.replace(config.data, path=os.path.abspath(args.data))
         config = dataclasses.replace(config, data=data)
     _process_settings(config)
-    _print_metrics(run_slam(config, run.root, resume=True))
+    with _viewer(args, config, run.root) as observers:
+        _print_metrics(run_slam(config, run.root, resume=True, observers=observers))
     return 0
 
 
@@ -238,6 +266,70 @@ def _command_mesh(args: argparse.Namespace) -> int:
         f"{result.resolution:g} m grid, {result.seconds:.1f} s)"
     )
     return 0
+
+
+def _command_render(args: argparse.Namespace) -> int:
+    from eslam.workflows.render_views import RenderOptions, render_run
+
+    options = RenderOptions(
+        trajectory=Path(args.trajectory) if args.trajectory else None,
+        orbit=args.orbit,
+        size=args.size,
+        out=Path(args.out) if args.out else None,
+        device=args.device,
+        overwrite=args.overwrite,
+        video=not args.no_video,
+        fps=args.fps,
+    )
+    result = render_run(args.run_dir, options)
+    width, height = result.size
+    skipped = f", {result.skipped} missing poses skipped" if result.skipped else ""
+    print(f"wrote {result.views} views ({width}x{height}{skipped}) to {result.out}")
+    print(f"video: {result.video}" if result.video is not None else result.video_note)
+    return 0
+
+
+def _add_render_command(commands: argparse._SubParsersAction) -> None:
+    from eslam.workflows.render_views import DEFAULT_ORBIT_VIEWS
+
+    render = commands.add_parser(
+        "render",
+        help="render colour and depth views from a run's map.pt (no input depth)",
+        description=(
+            "Render views of the saved map along the run's estimated trajectory (default), "
+            "a trajectory file or an orbit, with the run's camera: OUT/colour/NNNNNN.png "
+            "(8-bit RGB), OUT/depth/NNNNNN.png (16-bit millimetres, 0 = nothing hit) and "
+            "OUT/video.mp4 (needs imageio-ffmpeg, the [viewer] extra). See docs/render.md."
+        ),
+    )
+    render.add_argument("run_dir", metavar="RUN_DIR", help="folder of a run (config.yaml, map.pt)")
+    path = render.add_mutually_exclusive_group()
+    path.add_argument(
+        "--trajectory",
+        metavar="FILE",
+        help="poses to render: TUM file, Replica traj.txt or run folder (default: the run's)",
+    )
+    path.add_argument(
+        "--orbit",
+        nargs="?",
+        const=DEFAULT_ORBIT_VIEWS,
+        type=_positive_int,
+        metavar="N",
+        help=f"N views on a circle around the scene's centre (default {DEFAULT_ORBIT_VIEWS})",
+    )
+    render.add_argument(
+        "--size", type=_image_size, metavar="WxH", help="image size (default: the run's)"
+    )
+    render.add_argument("--out", metavar="DIR", help="output folder (default RUN_DIR/render)")
+    render.add_argument(
+        "--device", default="cpu", help="auto, cpu, cuda, cuda:N or mps (default cpu)"
+    )
+    render.add_argument("--overwrite", action="store_true", help="replace an existing --out")
+    render.add_argument(
+        "--fps", type=_positive_float, default=30.0, help="video frame rate (default 30)"
+    )
+    render.add_argument("--no-video", action="store_true", help="images only, no video.mp4")
+    render.set_defaults(handler=_command_render)
 
 
 def _command_demo(args: argparse.Namespace) -> int:
@@ -578,7 +670,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--realtime",
         action="store_true",
         help="drop frames that arrive while busy, keep the newest; replay a recording at its "
-        "recorded rate (sets data.realtime; always on for a live camera; docs/realtime.md)",
+        "recorded rate (sets data.realtime; always on for a live camera; docs/live.md)",
     )
     run.add_argument(
         "--source",
@@ -592,6 +684,7 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument(
         "--camera-fps", type=_positive_int, default=30, help="live camera: frame rate (30)"
     )
+    _add_viewer_options(run)
     run.set_defaults(handler=_command_run)
 
     configs = commands.add_parser(
@@ -619,6 +712,7 @@ def build_parser() -> argparse.ArgumentParser:
     resume.add_argument(
         "--data", metavar="PATH", help="the run's sequence, where it moved (sets data.path)"
     )
+    _add_viewer_options(resume)
     resume.set_defaults(handler=_command_resume)
 
     mesh = commands.add_parser(
@@ -640,6 +734,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--device", default="cpu", help="auto, cpu, cuda, cuda:N or mps (default cpu)"
     )
     mesh.set_defaults(handler=_command_mesh)
+    _add_render_command(commands)
 
     demo = commands.add_parser(
         "demo",

@@ -26,6 +26,7 @@ from eslam.config.schema import (
     SdfTrackerConfig,
     TopicsConfig,
     TrackingConfig,
+    ViewerConfig,
 )
 
 __all__ = [
@@ -46,6 +47,7 @@ __all__ = [
     "SdfTrackerConfig",
     "TopicsConfig",
     "TrackingConfig",
+    "ViewerConfig",
     "config_from_dict",
     "config_help",
     "config_to_dict",

@@ -84,7 +84,7 @@ class DataConfig:
     realtime: bool = False
     """Real-time mode (`--realtime`, always on for a live camera): frames that arrive while
     the system is busy are dropped, keeping the newest; a recording is replayed at its
-    recorded rate. Such a run cannot be resumed (docs/realtime.md)."""
+    recorded rate. Such a run cannot be resumed (docs/live.md)."""
     replay_fps: float | None = None
     """Real-time replay of a recording: release frames at this rate; null = at their
     timestamps (needed when the timestamps are frame numbers, e.g. Replica folders)."""
@@ -448,6 +448,31 @@ class OutputConfig:
 
 
 @dataclass
+class ViewerConfig:
+    """What the live viewer shows (`eslam run --viewer rerun` or `--viewer-save FILE.rrd`,
+    docs/live.md); without a viewer these keys do nothing."""
+
+    render_every: int = 10
+    """Render the current frame from the map (depth and colour, no input depth) every
+    this many frames; 0 = never. Each render pauses the run (seconds on a CPU)."""
+    render_downscale: int = 2
+    """Render at 1/this of the camera's width and height (1 = full size)."""
+    mesh_every: int = 5
+    """Extract and show the mesh every this many keyframes, and at the end; 0 = never.
+    Each extraction pauses the run."""
+    mesh_resolution: float = 0.05
+    """Marching-cubes grid step of the viewer's mesh, metres (coarser than
+    output.mesh_resolution: it is extracted again and again while the run waits)."""
+
+    def __post_init__(self) -> None:
+        _at_least(self, "render_every", 0)
+        _at_least(self, "render_downscale", 1)
+        _at_least(self, "mesh_every", 0)
+        if not self.mesh_resolution > 0:
+            raise ValueError(f"mesh_resolution must be > 0, got {self.mesh_resolution}")
+
+
+@dataclass
 class ESLAMConfig:
     """Everything a run needs; saved fully resolved as config.yaml in the run folder."""
 
@@ -473,6 +498,8 @@ class ESLAMConfig:
     """Mapping and keyframes."""
     output: OutputConfig = dataclasses.field(default_factory=OutputConfig)
     """Checkpoints, mesh and progress display."""
+    viewer: ViewerConfig = dataclasses.field(default_factory=ViewerConfig)
+    """The live viewer (used only with --viewer or --viewer-save)."""
 
     def __post_init__(self) -> None:
         if self.seed < 0:

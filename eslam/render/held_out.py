@@ -20,6 +20,7 @@ from eslam.geometry.camera import backproject_depth, project_points
 from eslam.render.rays import camera_directions
 from eslam.render.renderer import SceneFieldLike
 from eslam.render.sampling import ray_box_intersection
+from eslam.render.surface import first_zero_crossing, interpolate_zero
 from eslam.types import Frame
 
 OBSERVED_TOLERANCE_M = 0.05
@@ -87,12 +88,11 @@ def surface_depth(
         points = o[:, None, :] + z[..., None] * d[:, None, :]
         sdf = field.query(points.reshape(-1, 3), with_rgb=False).sdf.reshape(z.shape)
         sdf = torch.where(inside, sdf, torch.ones_like(sdf))
-        crossing = (sdf[:, :-1] > 0) & (sdf[:, 1:] <= 0)
-        hit = crossing.any(dim=1)
-        first = crossing.float().argmax(dim=1, keepdim=True)
-        s_a, s_b = sdf.gather(1, first), sdf.gather(1, first + 1)
-        z_a = z.gather(1, first)
-        depth = (z_a + step * s_a / (s_a - s_b).clamp_min(1e-12))[:, 0]
+        index, hit = first_zero_crossing(z, sdf)
+        first = index[:, None]
+        s_a, s_b = sdf.gather(1, first)[:, 0], sdf.gather(1, first + 1)[:, 0]
+        z_a = z.gather(1, first)[:, 0]
+        depth = interpolate_zero(z_a, z_a + step, s_a, s_b)
         depths.append(torch.where(hit, depth, torch.full_like(depth, float("nan"))))
     return torch.cat(depths)
 

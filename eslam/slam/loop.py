@@ -285,6 +285,7 @@ class RunLoop:
             mapped=mapped,
             tracking_s=done_tracking - started,
             mapping_s=done - done_tracking,
+            frame=frame,
         )
 
     def _create_field(self, frame: Frame, has_depth: bool, pose: torch.Tensor) -> None:
@@ -463,7 +464,7 @@ def _open_input(
 
 def check_resumable(config: ESLAMConfig, source: FrameSource | None, run_dir: Path) -> None:
     """Refuse to resume a real-time run: which frames it processed depended on timing (the
-    rest were dropped), so no frame "follows its checkpoint" (docs/realtime.md).
+    rest were dropped), so no frame "follows its checkpoint" (docs/live.md).
 
     Raises:
         ConfigError: the run in ``run_dir`` ran in real time, or ``source`` is live.

@@ -23,6 +23,7 @@ import torch
 
 from eslam.config import ESLAMConfig
 from eslam.slam.tracking import TrackingQuality
+from eslam.types import Frame
 
 if TYPE_CHECKING:
     from eslam.slam.state import SLAMState
@@ -64,6 +65,8 @@ class FrameDone:
             failed frame keeps the motion model's pose and is no keyframe.
         mapped: whether the frame became a keyframe and was mapped.
         tracking_s / mapping_s: wall time of each part, seconds (device work included).
+        frame: the input frame itself (host images, camera, ground truth), for observers
+            that show it (a viewer); None where a sender has none to give.
     """
 
     index: int
@@ -73,6 +76,7 @@ class FrameDone:
     mapped: bool
     tracking_s: float
     mapping_s: float
+    frame: Frame | None = None
 
 
 @dataclass(frozen=True, eq=False)
