@@ -75,13 +75,16 @@ class ViewerSink(Protocol):
 
 
 def frame_scalars(done: FrameDone) -> dict[str, float]:
-    """The numbers plotted per frame: tracking and mapping time (ms) and, from trackers
-    that judge themselves, the inlier share and residual (mm). One entry per plot: a new
-    number (e.g. dropped frames) is one more line here."""
+    """The numbers plotted per frame: tracking and mapping time (ms), the frames of the
+    stream skipped so far (a real-time run's drops: the frame's position in its stream
+    minus its position in the run; 0 otherwise) and, from trackers that judge themselves,
+    the inlier share and residual (mm). One entry per plot."""
     values = {
         "time/tracking_ms": 1000.0 * done.tracking_s,
         "time/mapping_ms": 1000.0 * done.mapping_s,
     }
+    if done.frame is not None:
+        values["stream/dropped_frames"] = float(max(done.frame.index - done.index, 0))
     if done.quality is not None:
         values["tracking/inlier_fraction"] = float(done.quality.inlier_fraction)
         values["tracking/residual_mm"] = 1000.0 * float(done.quality.residual_m)

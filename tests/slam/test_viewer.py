@@ -89,7 +89,12 @@ def test_the_viewer_shows_a_frame_and_leaves_the_run_unchanged(
     meshes = sink.of("mesh")
     assert len(meshes) == 2 and meshes[0][2] > 0, "at the keyframe and at the end"
     scalars = {name: value for call in sink.of("scalars") for name, value in call[2].items()}
-    assert scalars == {"time/tracking_ms": 250.0, "time/mapping_ms": 500.0, "mapping/loss": 0.125}
+    assert scalars == {
+        "time/tracking_ms": 250.0,
+        "time/mapping_ms": 500.0,
+        "stream/dropped_frames": 0.0,
+        "mapping/loss": 0.125,
+    }
     assert sink.calls[-1] == ("close", True) and len(sink.of("close")) == 1
 
 
@@ -130,3 +135,15 @@ def test_without_a_viewer_option_nothing_of_the_viewer_is_imported() -> None:
         [sys.executable, "-c", code], capture_output=True, text=True, check=True, timeout=120
     )
     assert result.stdout.strip() == "[] []"
+
+
+def test_dropped_frames_are_the_stream_position_ahead_of_the_run_position(tiny_sequence):
+    from eslam.slam.viewer import frame_scalars
+
+    image = open_sequence(DataConfig(path=str(tiny_sequence)))[3]  # the stream's 4th frame
+    pose = torch.eye(4)
+    dropped = frame_scalars(FrameDone(1, pose, True, None, False, 0.0, 0.0, frame=image))
+    assert dropped["stream/dropped_frames"] == 2.0
+    assert "stream/dropped_frames" not in frame_scalars(
+        FrameDone(1, pose, True, None, False, 0.0, 0.0)
+    )
