@@ -19,7 +19,7 @@ from dataclasses import dataclass
 from types import TracebackType
 
 from eslam.config import DataConfig
-from eslam.data.prefetch import PrefetchedFrames
+from eslam.data.prefetch import PrefetchedFrames, ReaderThread
 from eslam.data.realtime import LatestFrameReader, ReplayPace
 from eslam.types import Frame
 
@@ -44,7 +44,7 @@ class Feed:
     stream: LatestFrameReader | None
 
     def __enter__(self) -> Feed:
-        if isinstance(self.frames, PrefetchedFrames | LatestFrameReader):
+        if isinstance(self.frames, ReaderThread):
             self.frames.__enter__()
         return self
 
@@ -54,7 +54,7 @@ class Feed:
         error: BaseException | None,
         traceback: TracebackType | None,
     ) -> None:
-        if isinstance(self.frames, PrefetchedFrames | LatestFrameReader):
+        if isinstance(self.frames, ReaderThread):
             self.frames.close()
 
 

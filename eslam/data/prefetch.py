@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import queue
 import threading
+from abc import ABC, abstractmethod
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from types import TracebackType
@@ -49,7 +50,30 @@ def close_iterator(iterator: Iterator[Frame]) -> None:
         close()
 
 
-class PrefetchedFrames:
+class ReaderThread(ABC):
+    """A frame reader running on ``self.thread``: the thread starts when the ``with``
+    block is entered and :meth:`close` ends it when the block is left, however it ends."""
+
+    thread: threading.Thread
+
+    def __enter__(self):
+        self.thread.start()
+        return self
+
+    def __exit__(
+        self,
+        kind: type[BaseException] | None,
+        error: BaseException | None,
+        traceback: TracebackType | None,
+    ) -> None:
+        self.close()
+
+    @abstractmethod
+    def close(self) -> None:
+        """Stop the thread and wait for it (idempotent)."""
+
+
+class PrefetchedFrames(ReaderThread):
     """The frames of ``source``, read up to ``depth`` frames ahead on a thread (module doc).
 
     Use as a context manager; iterate it once inside the ``with`` block.
@@ -67,18 +91,6 @@ class PrefetchedFrames:
         self._stop = threading.Event()
         self._done = False
         self.thread = threading.Thread(target=self._read, name="eslam-prefetch", daemon=True)
-
-    def __enter__(self) -> PrefetchedFrames:
-        self.thread.start()
-        return self
-
-    def __exit__(
-        self,
-        kind: type[BaseException] | None,
-        error: BaseException | None,
-        traceback: TracebackType | None,
-    ) -> None:
-        self.close()
 
     def _read(self) -> None:
         """The thread: read frames into the queue until the source ends or it is told to stop."""

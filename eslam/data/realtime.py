@@ -23,11 +23,10 @@ import threading
 import time
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
-from types import TracebackType
 
 import numpy as np
 
-from eslam.data.prefetch import JOIN_TIMEOUT_S, close_iterator
+from eslam.data.prefetch import JOIN_TIMEOUT_S, ReaderThread, close_iterator
 from eslam.errors import ConfigError
 from eslam.types import Frame
 
@@ -96,7 +95,7 @@ class StreamCounts:
         return (self.received - 1) / self.arrivals_s
 
 
-class LatestFrameReader:
+class LatestFrameReader(ReaderThread):
     """The newest frame of ``source`` whenever the loop asks (module doc).
 
     Use as a context manager; iterate it once inside the ``with`` block.
@@ -133,18 +132,6 @@ class LatestFrameReader:
         self._closed_at: float | None = None
         self.source_indices: list[int] = []
         self.thread = threading.Thread(target=self._read, name="eslam-realtime", daemon=True)
-
-    def __enter__(self) -> LatestFrameReader:
-        self.thread.start()
-        return self
-
-    def __exit__(
-        self,
-        kind: type[BaseException] | None,
-        error: BaseException | None,
-        traceback: TracebackType | None,
-    ) -> None:
-        self.close()
 
     def _read(self) -> None:
         """The thread: release frames into the slot until the source ends or it must stop."""
