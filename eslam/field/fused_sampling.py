@@ -1,0 +1,231 @@
+"""Every plane level of a field sampled in ONE autograd op (``plane_sampling: fused``).
+
+The same bilinear interpolation as the reference
+(:func:`eslam.field.planes.sample_planes_reference`: ``grid_sample`` with
+align_corners=True and border padding), computed as weighted sums
+of channel rows gathered from channels-last planes. For a plane of true size (h, w) and
+a point's plane coordinates (u, v) in a level's [-1, 1] (grid_sample's unnormalisation
+and border clip):
+
+    x = clamp((u + 1) / 2 (w - 1), 0, w - 1),    y = clamp((v + 1) / 2 (h - 1), 0, h - 1)
+    x0 = min(floor(x), w - 2),  fx = x - x0      (y0, fy alike)
+    f = (1-fx)(1-fy) P[y0, x0] + fx (1-fy) P[y0, x0+1] + (1-fx) fy P[y0+1, x0] + fx fy P[y0+1, x0+1]
+
+A level's feature is the sum over its xy, xz and yz planes, so each point reads 12
+rows (3 planes x 4 corners) of the level's (3 H W, C) row table: one
+``F.embedding_bag`` (mode sum, the bilinear weights as per-sample weights) per level,
+without materialising the (N, 12, C) gathered rows.
+
+Backward (hand-written, :class:`FusedPlaneSampling`):
+
+* planes: dL/dP[r] = sum over (n, k) with row r of w_nk g_n (embedding_bag's dense
+  backward: a sorted segment sum). Padding beyond a plane's true size is never read, so
+  it gets exactly zero gradient.
+* coordinates: with d_nk = <P[r_nk], g_n> (embedding_bag's per-sample-weight backward),
+  df/dfx = (1-fy)(d01 - d00) + fy (d11 - d10), df/dfy = (1-fx)(d10 - d00) + fx (d11 - d01),
+  times dx/du = (w - 1) / 2 inside the plane and 0 on or beyond its border (grid_sample's
+  border-padding gradient), summed into the point's two coordinates per plane.
+
+The backward is not itself differentiable (double backward raises): the SDF tracker
+needs only first derivatives of the TSDF w.r.t. points (``torch.autograd.grad`` without
+``create_graph``), and mapping and tracking need first derivatives only.
+
+CUDA: the same op runs on CUDA tensors (embedding_bag has CUDA kernels). A Triton
+kernel is not provided: it could not be tested here (no GPU, and the Triton
+interpreter was not installed in the development environment).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import torch
+import torch.nn.functional as F
+from torch.autograd.function import once_differentiable
+
+PlaneShapes = tuple[tuple[int, int], ...]
+
+CORNERS = 4
+"""Bilinear corners per plane look-up, in the order (y0, x0), (y0, x1), (y1, x0), (y1, x1)."""
+
+LOOKUPS = 3 * CORNERS
+"""Rows one point reads from a level: 3 planes x 4 corners."""
+
+EMBEDDING_BAG_SUM = 0
+"""The ``mode`` code of a summing embedding_bag in aten's private signatures."""
+
+
+def row_table(planes: torch.Tensor) -> torch.Tensor:
+    """(3 H W, C) rows of a level's (3, C, H, W) planes: row (i H + y) W + x holds the C
+    features of plane i at (y, x). A view, no copy, when ``planes`` is channels-last."""
+    count, channels, height, width = planes.shape
+    return planes.permute(0, 2, 3, 1).reshape(count * height * width, channels)
+
+
+def bilinear_corners(
+    coords: torch.Tensor, shapes: PlaneShapes, height: int, width: int
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Rows, weights and coordinate derivatives of one level's 12 look-ups per point.
+
+    Args:
+        coords: (N, 3) the level's own normalised coordinates (NaN reads the lower border,
+            as in the reference).
+        shapes: the true (h, w) of the xy, xz and yz planes.
+        height, width: the padded plane size (H, W) of the row table.
+
+    Returns:
+        rows (N, 12) int64 into :func:`row_table`; weights (N, 12) bilinear weights;
+        slopes (4, N, 3): fx, fy, dx/du and dy/dv per plane (the last two 0 where the
+        coordinate is clamped to the border), for the backward.
+    """
+    dtype, device = coords.dtype, coords.device
+    coords = torch.nan_to_num(coords, nan=-1.0)
+    u = coords[:, [0, 0, 1]]  # each plane's W-axis coordinate: x, x, y
+    v = coords[:, [1, 2, 2]]  # each plane's H-axis coordinate: y, z, z
+    span_w = torch.tensor([w - 1 for _, w in shapes], dtype=dtype, device=device)
+    span_h = torch.tensor([h - 1 for h, _ in shapes], dtype=dtype, device=device)
+    x = (u + 1) / 2 * span_w
+    y = (v + 1) / 2 * span_h
+    slope_x = torch.where((x > 0) & (x < span_w), span_w / 2, 0.0)
+    slope_y = torch.where((y > 0) & (y < span_h), span_h / 2, 0.0)
+    x = torch.minimum(x.clamp(min=0), span_w)
+    y = torch.minimum(y.clamp(min=0), span_h)
+    x0 = torch.minimum(x.floor(), (span_w - 1).clamp(min=0))
+    y0 = torch.minimum(y.floor(), (span_h - 1).clamp(min=0))
+    fx, fy = x - x0, y - y0
+    step_x = (span_w > 0).to(torch.int64)  # 0 on a plane one vertex wide
+    step_y = (span_h > 0).to(torch.int64) * width
+    plane = torch.arange(3, device=device) * (height * width)
+    base = plane + y0.to(torch.int64) * width + x0.to(torch.int64)
+    rows = torch.stack((base, base + step_x, base + step_y, base + step_y + step_x), dim=-1)
+    gx, gy = 1 - fx, 1 - fy
+    weights = torch.stack((gy * gx, gy * fx, fy * gx, fy * fx), dim=-1)
+    count = coords.shape[0]
+    return (
+        rows.reshape(count, LOOKUPS),
+        weights.reshape(count, LOOKUPS),
+        torch.stack((fx, fy, slope_x, slope_y)),
+    )
+
+
+def _bag_layout(count: int, device: torch.device) -> tuple[torch.Tensor, torch.Tensor]:
+    """Offsets (N,) and the bag of every look-up (12 N,) of N bags of 12 look-ups each."""
+    offsets = torch.arange(0, count * LOOKUPS, LOOKUPS, device=device)
+    bag = torch.arange(count, device=device).repeat_interleave(LOOKUPS)
+    return offsets, bag
+
+
+def _plane_gradient(
+    grad: torch.Tensor, rows: torch.Tensor, weights: torch.Tensor, planes: torch.Tensor
+) -> torch.Tensor:
+    """dL/dplanes (3, C, H, W) (channels-last strides): sum_{n,k} w_nk g_n into row r_nk."""
+    count = grad.shape[0]
+    _, bag = _bag_layout(count, grad.device)
+    sizes = torch.full((count,), LOOKUPS, dtype=torch.int64, device=grad.device)
+    table = torch.ops.aten._embedding_bag_dense_backward(
+        grad.contiguous(),
+        rows.reshape(-1),
+        bag,
+        sizes,
+        torch.empty(0, dtype=torch.int64, device=grad.device),
+        planes.shape[0] * planes.shape[2] * planes.shape[3],
+        False,
+        EMBEDDING_BAG_SUM,
+        weights.reshape(-1),
+    )
+    count_planes, channels, height, width = planes.shape
+    return table.view(count_planes, height, width, channels).permute(0, 3, 1, 2)
+
+
+def _coordinate_gradient(
+    grad: torch.Tensor,
+    rows: torch.Tensor,
+    slopes: torch.Tensor,
+    planes: torch.Tensor,
+) -> torch.Tensor:
+    """dL/dcoords (N, 3) from the dots d_nk = <P[r_nk], g_n> (module doc)."""
+    count = grad.shape[0]
+    offsets, bag = _bag_layout(count, grad.device)
+    dots = torch.ops.aten._embedding_bag_per_sample_weights_backward(
+        grad.contiguous(), row_table(planes), rows.reshape(-1), offsets, bag, EMBEDDING_BAG_SUM
+    ).view(count, 3, CORNERS)
+    d00, d01, d10, d11 = dots.unbind(-1)
+    fx, fy, slope_x, slope_y = slopes
+    du = ((1 - fy) * (d01 - d00) + fy * (d11 - d10)) * slope_x
+    dv = ((1 - fx) * (d10 - d00) + fx * (d11 - d01)) * slope_y
+    # planes xy, xz, yz read (u, v) = (x, y), (x, z), (y, z)
+    return torch.stack((du[:, 0] + du[:, 1], dv[:, 0] + du[:, 2], dv[:, 1] + dv[:, 2]), dim=1)
+
+
+class FusedPlaneSampling(torch.autograd.Function):
+    """Sum of the bilinear features of each level's three planes, all levels in one op.
+
+    Inputs: the level shapes (a tuple of :data:`PlaneShapes`), then L coordinate tensors
+    (N, 3), then L plane tensors (3, C_l, H_l, W_l). Outputs: L tensors (N, C_l).
+    """
+
+    @staticmethod
+    def forward(ctx, shapes: tuple[PlaneShapes, ...], *tensors: torch.Tensor):
+        levels = len(shapes)
+        coords, planes = tensors[:levels], tensors[levels:]
+        outputs, saved = [], []
+        for level_coords, level_planes, level_shapes in zip(coords, planes, shapes, strict=True):
+            _, _, height, width = level_planes.shape
+            rows, weights, slopes = bilinear_corners(
+                level_coords.to(level_planes.dtype), level_shapes, height, width
+            )
+            outputs.append(
+                F.embedding_bag(
+                    rows, row_table(level_planes), per_sample_weights=weights, mode="sum"
+                )
+            )
+            saved += [rows, weights, slopes]
+        ctx.levels = levels
+        ctx.coord_dtypes = [c.dtype for c in coords]
+        ctx.save_for_backward(*planes, *saved)
+        return tuple(outputs)
+
+    @staticmethod
+    @once_differentiable
+    def backward(ctx, *grads: torch.Tensor):
+        levels = ctx.levels
+        planes = ctx.saved_tensors[:levels]
+        saved = ctx.saved_tensors[levels:]
+        need = ctx.needs_input_grad[1:]
+        coord_grads: list[torch.Tensor | None] = [None] * levels
+        plane_grads: list[torch.Tensor | None] = [None] * levels
+        for level in range(levels):
+            rows, weights, slopes = saved[3 * level : 3 * level + 3]
+            grad = grads[level]
+            if need[levels + level]:
+                plane_grads[level] = _plane_gradient(grad, rows, weights, planes[level])
+            if need[level]:
+                coord_grads[level] = _coordinate_gradient(grad, rows, slopes, planes[level]).to(
+                    ctx.coord_dtypes[level]
+                )
+        return (None, *coord_grads, *plane_grads)
+
+
+def sample_levels_fused(
+    coords: Sequence[torch.Tensor],
+    planes: Sequence[torch.Tensor],
+    shapes: Sequence[PlaneShapes],
+) -> tuple[torch.Tensor, ...]:
+    """Per level, the (N, C) sum of its three planes' bilinear features, in one op.
+
+    Args:
+        coords: per level, (N, 3) the points in the level's own [-1, 1] coordinates
+            (the same tensor may serve several levels).
+        planes: per level, (3, C, H, W) padded planes, plane i in ``[i, :, :h_i, :w_i]``;
+            channels-last storage makes the row table a view (otherwise it is copied).
+        shapes: per level, the true (h, w) of its xy, xz and yz planes.
+
+    Returns:
+        One (N, C) tensor per level, equal to :func:`~eslam.field.planes.sample_planes_reference`.
+    """
+    if not (len(coords) == len(planes) == len(shapes)) or not coords:
+        raise ValueError(
+            f"need one coordinate tensor, plane tensor and shape per level, got "
+            f"{len(coords)}, {len(planes)} and {len(shapes)}"
+        )
+    return FusedPlaneSampling.apply(tuple(tuple(s) for s in shapes), *coords, *planes)
