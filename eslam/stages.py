@@ -8,6 +8,8 @@ Python glue and small tensor ops.
 
 from __future__ import annotations
 
+from collections.abc import Iterable
+
 import torch
 
 STAGES = (
@@ -30,3 +32,21 @@ def stage(name: str) -> torch.profiler.record_function:
     if name not in STAGES:
         raise ValueError(f"unknown stage {name!r}; stages are {', '.join(STAGES)}")
     return torch.profiler.record_function(PREFIX + name)
+
+
+def stage_totals(events: Iterable[object]) -> dict[str, float]:
+    """Microseconds of host time per stage, summed over profiler events.
+
+    Args:
+        events: ``torch.profiler.profile(...).events()`` (or ``key_averages()``): any
+            objects with ``name`` and ``cpu_time_total`` (microseconds).
+
+    Returns:
+        Every stage of :data:`STAGES`, 0 for one that never ran.
+    """
+    totals = dict.fromkeys(STAGES, 0.0)
+    for event in events:
+        name = getattr(event, "name", "")
+        if name.startswith(PREFIX) and name[len(PREFIX) :] in totals:
+            totals[name[len(PREFIX) :]] += float(getattr(event, "cpu_time_total", 0.0))
+    return totals

@@ -428,8 +428,10 @@ class PlaneLevel(nn.Module):
         self._refresh_window()
 
     def _refresh_window(self) -> None:
-        identity = torch.tensor(IDENTITY_WINDOW, dtype=self.window.dtype)
-        self._identity = bool(torch.equal(self.window.detach().cpu(), identity))
+        window = self.window.detach().cpu()
+        self._identity = bool(torch.equal(window, torch.tensor(IDENTITY_WINDOW).to(window)))
+        # the window as Python numbers for the fused op (read once here, not per query)
+        self._window_bounds = None if self._identity else tuple(map(tuple, window.tolist()))
 
     def grow(self, growth: LevelGrowth, generator: torch.Generator | None = None) -> None:
         """Enlarge the grid as ``growth`` says, keeping every old feature at its vertex.
@@ -474,9 +476,11 @@ class PlaneLevel(nn.Module):
 
     def sample(self, points_n: torch.Tensor) -> torch.Tensor:
         """(N, 3) normalised points -> (N, C) sum of the three planes' bilinear features."""
-        points_n = self.coordinates(points_n)
         if self.sampling == "fused":
-            return sample_levels_fused([points_n], [self.planes], [self.shapes])[0]
+            return sample_levels_fused(
+                points_n, [self.planes], [self.shapes], [self._window_bounds]
+            )[0]
+        points_n = self.coordinates(points_n)
         if self.sampling == "fast":
             return sample_planes_fast(self.planes, self.shapes, points_n, self.padding, self.scale)
         return sample_planes_reference(self.planes, self.shapes, points_n)
@@ -562,9 +566,10 @@ def fused_features(sets: Sequence[PlaneSet], points_n: torch.Tensor) -> list[tor
     """
     levels = [level for planes in sets for level in planes.levels.values()]
     per_level = sample_levels_fused(
-        [level.coordinates(points_n) for level in levels],
+        points_n,
         [level.planes for level in levels],
         [level.shapes for level in levels],
+        [level._window_bounds for level in levels],
     )
     features, start = [], 0
     for planes in sets:

@@ -134,12 +134,12 @@ def test_one_op_samples_levels_of_different_sizes_and_rejects_mismatched_lists()
         for k, s in enumerate(shapes)
     ]
     coords = torch.rand(50, 3, generator=generator, dtype=torch.float64) * 3 - 1.5
-    outputs = sample_levels_fused([coords] * 3, planes, shapes)
+    outputs = sample_levels_fused(coords, planes, shapes)
     for out, level_planes, level_shapes in zip(outputs, planes, shapes, strict=True):
         expected = sample_planes_reference(level_planes, level_shapes, coords)
         torch.testing.assert_close(out, expected, rtol=0, atol=1e-12)
-    with pytest.raises(ValueError, match="one coordinate tensor"):
-        sample_levels_fused([coords], planes, shapes)
+    with pytest.raises(ValueError, match="one plane tensor, shape and window"):
+        sample_levels_fused(coords, planes, shapes[:2])
 
 
 def test_backward_is_checked_by_gradcheck_and_refuses_double_backward():
@@ -147,14 +147,15 @@ def test_backward_is_checked_by_gradcheck_and_refuses_double_backward():
     shapes = (plane_shapes((4, 3, 5)),)
     planes = torch.randn(3, 2, 5, 4, generator=generator, dtype=torch.float64)
     planes.requires_grad_(True)
+    window = ((-1.2, 0.9), (-1.0, 1.0), (-0.8, 1.3))  # a grown level's box
     # away from cell edges and borders, where the bilinear map is smooth
     coords = (
         torch.rand(6, 3, generator=generator, dtype=torch.float64) * 1.6 - 0.8
     ).requires_grad_(True)
     assert torch.autograd.gradcheck(
-        lambda c, p: FusedPlaneSampling.apply(shapes, c, p)[0], (coords, planes)
+        lambda c, p: FusedPlaneSampling.apply(shapes, (window,), c, p)[0], (coords, planes)
     )
-    (out,) = FusedPlaneSampling.apply(shapes, coords, planes)
+    (out,) = FusedPlaneSampling.apply(shapes, (window,), coords, planes)
     (gradient,) = torch.autograd.grad(out.sum(), coords, create_graph=True)
     with pytest.raises(RuntimeError):  # no second derivatives: never a silent zero
         gradient.sum().backward()
