@@ -30,9 +30,12 @@ The backward is not itself differentiable (double backward raises): the SDF trac
 needs only first derivatives of the TSDF w.r.t. points (``torch.autograd.grad`` without
 ``create_graph``), and mapping and tracking need first derivatives only.
 
-CUDA: the same op runs on CUDA tensors (embedding_bag has CUDA kernels). A Triton
-kernel is not provided: it could not be tested here (no GPU, and the Triton
-interpreter was not installed in the development environment).
+CUDA: the same op runs on CUDA tensors (embedding_bag and index_add_ have CUDA
+kernels; the constants are Python numbers, so the op copies nothing between host and
+device and never syncs). A Triton kernel (one launch for all levels, registered with
+``torch.library``) is not written yet: it was developed without a GPU, and the Triton
+interpreter (``TRITON_INTERPRET=1``) was not installed and tried in that session, so it
+could not have been tested.
 """
 
 from __future__ import annotations
@@ -62,10 +65,26 @@ def row_table(planes: torch.Tensor) -> torch.Tensor:
     return planes.permute(0, 2, 3, 1).reshape(count * height * width, channels)
 
 
+def level_grid(shapes: PlaneShapes) -> tuple[int, int, int]:
+    """The vertex counts (nx, ny, nz) behind a level's plane shapes (ny, nx), (nz, nx),
+    (nz, ny) (:func:`eslam.field.planes.plane_shapes`).
+
+    Raises:
+        ValueError: the shapes are not those of one grid.
+    """
+    (ny, nx), (nz, nx2), (nz2, ny2) = shapes
+    if (nx, ny, nz) != (nx2, ny2, nz2):
+        raise ValueError(f"plane shapes {shapes} are not the xy, xz, yz planes of one grid")
+    return nx, ny, nz
+
+
 def bilinear_corners(
     coords: torch.Tensor, shapes: PlaneShapes, height: int, width: int
 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """Rows, weights and coordinate derivatives of one level's 12 look-ups per point.
+
+    The planes share their axes (xy and xz read x at the same nx vertices, and so on),
+    so the vertex coordinate, cell and fraction are computed once per axis.
 
     Args:
         coords: (N, 3) the level's own normalised coordinates (NaN reads the lower border,
@@ -75,37 +94,42 @@ def bilinear_corners(
 
     Returns:
         rows (N, 12) int64 into :func:`row_table`; weights (N, 12) bilinear weights;
-        slopes (4, N, 3): fx, fy, dx/du and dy/dv per plane (the last two 0 where the
-        coordinate is clamped to the border), for the backward.
+        axes (2, N, 3): per axis x, y, z the fraction f and the slope d(vertex)/d(coord)
+        (0 where the coordinate is clamped to the border), for the backward.
     """
-    dtype, device = coords.dtype, coords.device
+    grid = level_grid(shapes)
     coords = torch.nan_to_num(coords, nan=-1.0)
-    u = coords[:, [0, 0, 1]]  # each plane's W-axis coordinate: x, x, y
-    v = coords[:, [1, 2, 2]]  # each plane's H-axis coordinate: y, z, z
-    span_w = torch.tensor([w - 1 for _, w in shapes], dtype=dtype, device=device)
-    span_h = torch.tensor([h - 1 for h, _ in shapes], dtype=dtype, device=device)
-    x = (u + 1) / 2 * span_w
-    y = (v + 1) / 2 * span_h
-    slope_x = torch.where((x > 0) & (x < span_w), span_w / 2, 0.0)
-    slope_y = torch.where((y > 0) & (y < span_h), span_h / 2, 0.0)
-    x = torch.minimum(x.clamp(min=0), span_w)
-    y = torch.minimum(y.clamp(min=0), span_h)
-    x0 = torch.minimum(x.floor(), (span_w - 1).clamp(min=0))
-    y0 = torch.minimum(y.floor(), (span_h - 1).clamp(min=0))
-    fx, fy = x - x0, y - y0
-    step_x = (span_w > 0).to(torch.int64)  # 0 on a plane one vertex wide
-    step_y = (span_h > 0).to(torch.int64) * width
-    plane = torch.arange(3, device=device) * (height * width)
-    base = plane + y0.to(torch.int64) * width + x0.to(torch.int64)
-    rows = torch.stack((base, base + step_x, base + step_y, base + step_y + step_x), dim=-1)
-    gx, gy = 1 - fx, 1 - fy
-    weights = torch.stack((gy * gx, gy * fx, fy * gx, fy * fx), dim=-1)
-    count = coords.shape[0]
-    return (
-        rows.reshape(count, LOOKUPS),
-        weights.reshape(count, LOOKUPS),
-        torch.stack((fx, fy, slope_x, slope_y)),
+    vertex, slope, cell = [], [], []
+    for axis, count in enumerate(grid):  # Python constants: no host-to-device copies
+        span = count - 1
+        position = (coords[:, axis] + 1) / 2 * span
+        slope.append(torch.where((position > 0) & (position < span), span / 2, 0.0))
+        position = position.clamp(0, span)
+        vertex.append(position)
+        cell.append(position.floor().clamp(max=max(span - 1, 0)))
+    vertex_t, cell_t = torch.stack(vertex, dim=-1), torch.stack(cell, dim=-1)
+    fraction = vertex_t - cell_t
+    x, y, z = cell_t.to(torch.int64).unbind(-1)
+    sx, sy, sz = (int(count > 1) for count in grid)  # 0 along an axis one vertex wide
+    plane_size = height * width
+    rows = []
+    for base, step_u, step_v in (
+        (y * width + x, sx, sy * width),
+        (plane_size + z * width + x, sx, sz * width),
+        (2 * plane_size + z * width + y, sy, sz * width),
+    ):
+        rows += [base, base + step_u, base + step_v, base + step_v + step_u]
+    ends = torch.stack((1 - fraction, fraction), dim=-1)  # (N, 3 axes, 2): cell, next
+    ex, ey, ez = ends.unbind(1)
+    weights = torch.cat(
+        (
+            (ey[:, :, None] * ex[:, None, :]).flatten(1),
+            (ez[:, :, None] * ex[:, None, :]).flatten(1),
+            (ez[:, :, None] * ey[:, None, :]).flatten(1),
+        ),
+        dim=1,
     )
+    return torch.stack(rows, dim=1), weights, torch.stack((fraction, torch.stack(slope, -1)))
 
 
 def _bag_layout(count: int, device: torch.device) -> tuple[torch.Tensor, torch.Tensor]:
@@ -151,10 +175,11 @@ def _coordinate_gradient(
         grad.contiguous(), row_table(planes), rows.reshape(-1), offsets, bag, EMBEDDING_BAG_SUM
     ).view(count, 3, CORNERS)
     d00, d01, d10, d11 = dots.unbind(-1)
-    fx, fy, slope_x, slope_y = slopes
-    du = ((1 - fy) * (d01 - d00) + fy * (d11 - d10)) * slope_x
-    dv = ((1 - fx) * (d10 - d00) + fx * (d11 - d01)) * slope_y
+    fraction, slope = slopes
     # planes xy, xz, yz read (u, v) = (x, y), (x, z), (y, z)
+    fu, fv = fraction[:, [0, 0, 1]], fraction[:, [1, 2, 2]]
+    du = ((1 - fv) * (d01 - d00) + fv * (d11 - d10)) * slope[:, [0, 0, 1]]
+    dv = ((1 - fu) * (d10 - d00) + fu * (d11 - d01)) * slope[:, [1, 2, 2]]
     return torch.stack((du[:, 0] + du[:, 1], dv[:, 0] + du[:, 2], dv[:, 1] + dv[:, 2]), dim=1)
 
 
@@ -167,9 +192,11 @@ def _to_window(points: torch.Tensor, window: Window | None) -> torch.Tensor:
     """q = 2 (p - w_min) / (w_max - w_min) - 1 per axis (identity for None)."""
     if window is None:
         return points
-    low = points.new_tensor([lo for lo, _ in window])
-    high = points.new_tensor([hi for _, hi in window])
-    return 2.0 * (points - low) / (high - low) - 1.0
+    # per axis with Python constants: no host-to-device copies (sync-free on a GPU)
+    return torch.stack(
+        [2.0 * (points[:, a] - lo) / (hi - lo) - 1.0 for a, (lo, hi) in enumerate(window)],
+        dim=-1,
+    )
 
 
 def _window_slope(window: Window | None) -> tuple[float, float, float]:
@@ -221,8 +248,11 @@ class FusedPlaneSampling(torch.autograd.Function):
                 plane_grads[level] = _plane_gradient(grad, rows, weights, planes[level])
             if need_points:
                 coords_grad = _coordinate_gradient(grad, rows, slopes, planes[level])
-                slope = coords_grad.new_tensor(_window_slope(ctx.windows[level]))
-                coords_grad = coords_grad * slope
+                if ctx.windows[level] is not None:
+                    slope = _window_slope(ctx.windows[level])
+                    coords_grad = torch.stack(
+                        [coords_grad[:, a] * slope[a] for a in range(3)], dim=-1
+                    )
                 points_grad = coords_grad if points_grad is None else points_grad + coords_grad
         if points_grad is not None:
             points_grad = points_grad.to(ctx.points_dtype)
