@@ -33,7 +33,8 @@ docs/benchmarks.md (or ``--docs PATH``) with the date, the machine and the comma
 Usage:
     python benchmarks/bench_core.py [--device cpu|cuda] [--repeats N] [--warmup N]
         [--threads N] [--samplings reference fast fused] [--breakdown-sampling S]
-        [--profile-repeats N] [--no-frame-work] [--no-append] [--docs PATH] [--note TEXT]
+        [--benchmarks field tracking mapping] [--profile-repeats N] [--no-frame-work]
+        [--no-append] [--docs PATH] [--note TEXT]
 """
 
 from __future__ import annotations
@@ -243,9 +244,13 @@ def workload(device: torch.device) -> Workload:
 
 
 def run(
-    device: torch.device, warmup: int, repeats: int, samplings: tuple[str, ...]
+    device: torch.device,
+    warmup: int,
+    repeats: int,
+    samplings: tuple[str, ...],
+    benchmarks: tuple[str, ...] = BENCHMARKS,
 ) -> tuple[dict[tuple[str, str], Stats], dict[str, object]]:
-    """Time every benchmark for each plane sampling, interleaved; also workload facts."""
+    """Time ``benchmarks`` for each plane sampling, interleaved; also workload facts."""
     work = workload(device)
     config = work.config
     fields = {sampling: build_field(config, sampling, device) for sampling in samplings}
@@ -257,11 +262,31 @@ def run(
         "fitted": any_field.bound.cpu().tolist(),
     }
     results: dict[tuple[str, str], Stats] = {}
-    steps = {s: field_query_step(f, work.points) for s, f in fields.items()}
-    for sampling, stats in time_interleaved(steps, warmup, repeats, device).items():
-        results["field", sampling] = stats
-    for field in fields.values():
-        field.zero_grad(set_to_none=True)
+    if "field" in benchmarks:
+        steps = {s: field_query_step(f, work.points) for s, f in fields.items()}
+        for sampling, stats in time_interleaved(steps, warmup, repeats, device).items():
+            results["field", sampling] = stats
+        for field in fields.values():
+            field.zero_grad(set_to_none=True)
+    if "tracking" in benchmarks:
+        results |= _tracking_results(fields, work, warmup, repeats, device)
+    if "mapping" in benchmarks:
+        steps = {
+            s: mapping_iteration(
+                f, work.views, work.poses, config, torch.Generator(device=device).manual_seed(SEED)
+            )
+            for s, f in fields.items()
+        }
+        for sampling, stats in time_interleaved(steps, warmup, repeats, device).items():
+            results["mapping", sampling] = stats
+    return results, facts
+
+
+def _tracking_results(
+    fields: dict[str, SceneField], work: Workload, warmup: int, repeats: int, device: torch.device
+) -> dict[tuple[str, str], Stats]:
+    """Tracking iterations of each field, interleaved, with the fields frozen."""
+    config = work.config
     steps = {
         s: tracking_iteration(
             f,
@@ -272,6 +297,7 @@ def run(
         )
         for s, f in fields.items()
     }
+    results = {}
     for field in fields.values():
         field.requires_grad_(False)
     for sampling, stats in time_interleaved(steps, warmup, repeats, device).items():
@@ -279,15 +305,7 @@ def run(
     for field in fields.values():
         field.requires_grad_(True)
         field.beta.requires_grad_(config.field.learn_beta)
-    steps = {
-        s: mapping_iteration(
-            f, work.views, work.poses, config, torch.Generator(device=device).manual_seed(SEED)
-        )
-        for s, f in fields.items()
-    }
-    for sampling, stats in time_interleaved(steps, warmup, repeats, device).items():
-        results["mapping", sampling] = stats
-    return results, facts
+    return results
 
 
 def profiled_stages(
@@ -408,7 +426,7 @@ def markdown_table(
             head += f" reference / {sampling} |"
             rule += "---:|"
     lines = [head, rule]
-    for name in BENCHMARKS:
+    for name in (b for b in BENCHMARKS if (b, samplings[0]) in results):
         row = f"| {labels[name]} |"
         for sampling in samplings:
             stats = results[name, sampling]
@@ -531,8 +549,16 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument(
         "--no-frame-work", action="store_true", help="skip the per-frame work outside iterations"
     )
+    parser.add_argument(
+        "--benchmarks",
+        nargs="+",
+        choices=BENCHMARKS,
+        default=list(BENCHMARKS),
+        help="what to time per sampling (default: field, tracking and mapping)",
+    )
     args = parser.parse_args(argv)
     args.samplings = tuple(dict.fromkeys(args.samplings))
+    args.benchmarks = tuple(dict.fromkeys(args.benchmarks))
     if args.repeats < 1 or args.warmup < 0 or args.threads < 0 or args.profile_repeats < 0:
         parser.error("--repeats must be >= 1, --warmup, --threads and --profile-repeats >= 0")
     check_device(parser, args)
@@ -546,7 +572,7 @@ def main(argv: list[str] | None = None) -> None:
     device = torch.device(args.device)
     command = command_line("benchmarks/bench_core.py", argv)
     load_start = load_average()
-    results, facts = run(device, args.warmup, args.repeats, args.samplings)
+    results, facts = run(device, args.warmup, args.repeats, args.samplings, args.benchmarks)
     parts = None
     if args.profile_repeats > 0:
         parts = breakdown(device, args.breakdown_sampling, args.warmup, args.profile_repeats)
