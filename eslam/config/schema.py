@@ -176,8 +176,11 @@ class FieldConfig:
     """Optimise beta with the decoders (release keeps it fixed at 10 for TUM)."""
     bound_multiple: float = 0.24
     """The bound's upper corner grows so each side is a multiple of this (release), metres."""
-    plane_sampling: Literal["fast", "reference"] = "fast"
-    """Plane interpolation: one batched grid_sample per level (fast) or one call per plane."""
+    plane_sampling: Literal["reference", "fast", "fused"] = "fused"
+    """Plane interpolation, all bilinear with border padding and the same results:
+    reference = one grid_sample per plane (readable); fast = one batched grid_sample per
+    level; fused = every level of the field in one op of row gathers from channels-last
+    planes with a hand-written backward (eslam/field/fused_sampling.py)."""
 
     def __post_init__(self) -> None:
         for name in ("geometry_resolution", "appearance_resolution"):

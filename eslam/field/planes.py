@@ -10,9 +10,15 @@ three planes, laid out as in the release:
 
 A level's three planes live in ONE parameter tensor of shape (3, C, Hmax, Wmax), each
 plane in the top-left corner ``[i, :, :h_i, :w_i]`` and zeros beyond (the padding gets
-no gradient). This lets the fast path sample all three planes in one batched
-``grid_sample`` call; the reference path slices each plane out and samples it alone.
-Both read the same parameters, and tests/field/test_planes.py holds them equal.
+no gradient). Three samplings read the same parameters (``FieldConfig.plane_sampling``):
+
+* reference: each plane sliced out and sampled alone by ``grid_sample`` (readable);
+* fast: a level's three planes in one batched ``grid_sample`` call;
+* fused: every level of the field (geometry and appearance, coarse and fine) in one op
+  of row gathers from channels-last planes with a hand-written backward
+  (:mod:`eslam.field.fused_sampling`); the planes are then stored channels-last.
+
+tests/field/test_planes.py and tests/field/test_fused_sampling.py hold them equal.
 """
 
 from __future__ import annotations
@@ -25,6 +31,11 @@ from typing import Literal
 import torch
 import torch.nn.functional as F
 from torch import nn
+
+from eslam.field.fused_sampling import sample_levels_fused
+
+PlaneSampling = Literal["reference", "fast", "fused"]
+"""How plane features are interpolated (``FieldConfig.plane_sampling``; module doc)."""
 
 PLANE_AXES: tuple[tuple[int, int], ...] = ((0, 1), (0, 2), (1, 2))
 """Point coordinates (W axis, H axis) each plane of a level is sampled at: xy, xz, yz."""
@@ -363,7 +374,8 @@ class PlaneLevel(nn.Module):
         planes: (3, C, Hmax, Wmax) parameter; plane i is ``planes[i, :, :h_i, :w_i]``,
             initialised normal(0, init_std) (release), zero padding beyond.
         shapes: the true (h, w) of the xy, xz, yz planes.
-        fast: sample with :func:`sample_planes_fast` (else the reference).
+        sampling: "reference", "fast" or "fused" (module doc); "fused" stores the planes
+            channels-last (same shape and values, other strides).
         window: (3, 2) buffer (in the state_dict): the box the first and last vertices
             span, in the scene's normalised coordinates; [-1, 1] on every axis until the
             scene bound grows (:meth:`grow`), then wider, so old vertices stay in place.
@@ -375,7 +387,7 @@ class PlaneLevel(nn.Module):
         grid: Sequence[int],
         channels: int,
         init_std: float,
-        fast: bool = True,
+        sampling: PlaneSampling = "fast",
         generator: torch.Generator | None = None,
     ):
         """Planes for a grid of (nx, ny, nz) vertices with ``channels`` features each.
@@ -384,7 +396,9 @@ class PlaneLevel(nn.Module):
         None: torch's global one).
         """
         super().__init__()
-        self.fast = fast
+        if sampling not in ("reference", "fast", "fused"):
+            raise ValueError(f"plane sampling must be reference, fast or fused, got {sampling!r}")
+        self.sampling = sampling
         self.init_std = float(init_std)
         grid = tuple(int(n) for n in grid)
         shapes = plane_shapes(grid)
@@ -401,6 +415,8 @@ class PlaneLevel(nn.Module):
         self.shapes = plane_shapes(grid)
         height, width = planes.shape[2], planes.shape[3]
         device = planes.device
+        if self.sampling == "fused":  # rows of C features contiguous: gathers read them whole
+            planes = planes.contiguous(memory_format=torch.channels_last)
         self.planes = nn.Parameter(planes)
         self.vertices = torch.tensor(grid, dtype=torch.int64, device=self.vertices.device)
         self.register_buffer(
@@ -412,8 +428,10 @@ class PlaneLevel(nn.Module):
         self._refresh_window()
 
     def _refresh_window(self) -> None:
-        identity = torch.tensor(IDENTITY_WINDOW, dtype=self.window.dtype)
-        self._identity = bool(torch.equal(self.window.detach().cpu(), identity))
+        window = self.window.detach().cpu()
+        self._identity = bool(torch.equal(window, torch.tensor(IDENTITY_WINDOW).to(window)))
+        # the window as Python numbers for the fused op (read once here, not per query)
+        self._window_bounds = None if self._identity else tuple(map(tuple, window.tolist()))
 
     def grow(self, growth: LevelGrowth, generator: torch.Generator | None = None) -> None:
         """Enlarge the grid as ``growth`` says, keeping every old feature at its vertex.
@@ -452,16 +470,23 @@ class PlaneLevel(nn.Module):
         """Learnable plane entries, padding excluded: C (nx ny + nx nz + ny nz)."""
         return self.channels * sum(h * w for h, w in self.shapes)
 
+    def coordinates(self, points_n: torch.Tensor) -> torch.Tensor:
+        """(N, 3) scene-normalised points in this level's own [-1, 1] (its window)."""
+        return points_n if self._identity else to_window(points_n, self.window)
+
     def sample(self, points_n: torch.Tensor) -> torch.Tensor:
         """(N, 3) normalised points -> (N, C) sum of the three planes' bilinear features."""
-        if not self._identity:
-            points_n = to_window(points_n, self.window)
-        if self.fast:
+        if self.sampling == "fused":
+            return sample_levels_fused(
+                points_n, [self.planes], [self.shapes], [self._window_bounds]
+            )[0]
+        points_n = self.coordinates(points_n)
+        if self.sampling == "fast":
             return sample_planes_fast(self.planes, self.shapes, points_n, self.padding, self.scale)
         return sample_planes_reference(self.planes, self.shapes, points_n)
 
     def extra_repr(self) -> str:
-        return f"grid={self.grid}, channels={self.channels}, fast={self.fast}"
+        return f"grid={self.grid}, channels={self.channels}, sampling={self.sampling}"
 
 
 LEVEL_NAMES = ("coarse", "fine")
@@ -483,7 +508,7 @@ class PlaneSet(nn.Module):
         init_std: float,
         levels: Literal["both", "coarse", "fine"] = "both",
         fusion: Literal["concat", "sum"] = "concat",
-        fast: bool = True,
+        sampling: PlaneSampling = "fast",
         generator: torch.Generator | None = None,
     ):
         """Planes over the fitted (3, 2) ``bound`` with (coarse, fine) cell sizes in metres.
@@ -499,7 +524,7 @@ class PlaneSet(nn.Module):
         names = LEVEL_NAMES if levels == "both" else (levels,)
         self.levels = nn.ModuleDict(
             {
-                name: PlaneLevel(grid_size(bound, res), channels, init_std, fast, generator)
+                name: PlaneLevel(grid_size(bound, res), channels, init_std, sampling, generator)
                 for name, res in zip(LEVEL_NAMES, resolution, strict=True)
                 if name in names
             }
@@ -509,7 +534,10 @@ class PlaneSet(nn.Module):
 
     def features(self, points_n: torch.Tensor) -> torch.Tensor:
         """(N, 3) normalised points -> (N, out_dim) features, levels coarse then fine."""
-        per_level = [level.sample(points_n) for level in self.levels.values()]
+        return self.combine([level.sample(points_n) for level in self.levels.values()])
+
+    def combine(self, per_level: Sequence[torch.Tensor]) -> torch.Tensor:
+        """The (N, out_dim) features from each level's (N, C) ones (coarse then fine)."""
         if self.fusion == "sum":
             return sum(per_level[1:], per_level[0])
         return torch.cat(per_level, dim=-1)
@@ -528,6 +556,27 @@ class PlaneSet(nn.Module):
         :func:`level_growth`); features inside the old grids keep their world positions."""
         for level in self.levels.values():
             level.grow(level_growth(level.grid, level.window, old_bound, new_bound), generator)
+
+
+def fused_features(sets: Sequence[PlaneSet], points_n: torch.Tensor) -> list[torch.Tensor]:
+    """Each plane set's (N, out_dim) features, every level of every set sampled in ONE
+    :func:`~eslam.field.fused_sampling.sample_levels_fused` op (the ``fused`` sampling).
+
+    Equal to ``[s.features(points_n) for s in sets]``.
+    """
+    levels = [level for planes in sets for level in planes.levels.values()]
+    per_level = sample_levels_fused(
+        points_n,
+        [level.planes for level in levels],
+        [level.shapes for level in levels],
+        [level._window_bounds for level in levels],
+    )
+    features, start = [], 0
+    for planes in sets:
+        count = len(planes.levels)
+        features.append(planes.combine(per_level[start : start + count]))
+        start += count
+    return features
 
 
 def _check_bound(bound: torch.Tensor) -> None:

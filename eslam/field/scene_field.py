@@ -14,7 +14,15 @@ from torch import nn
 
 from eslam.config import FieldConfig
 from eslam.field.decoders import appearance_decoder, geometry_decoder
-from eslam.field.planes import PlaneLevel, PlaneSet, enclosing_bound, fit_bound, normalize_points
+from eslam.field.planes import (
+    PlaneLevel,
+    PlaneSet,
+    enclosing_bound,
+    fit_bound,
+    fused_features,
+    normalize_points,
+)
+from eslam.stages import stage
 from eslam.types import FieldOutput
 
 
@@ -53,13 +61,12 @@ class SceneField(nn.Module):
         fitted = fit_bound(torch.as_tensor(bound).detach().cpu().double(), config.bound_multiple)
         self.register_buffer("bound", fitted.float())
         self.truncation = float(config.truncation)
-        fast = config.plane_sampling == "fast"
         common = dict(
             channels=config.channels,
             init_std=config.init_std,
             levels=config.levels,
             fusion=config.level_fusion,
-            fast=fast,
+            sampling=config.plane_sampling,
             generator=generator,
         )
         self.geometry = PlaneSet(fitted, config.geometry_resolution, **common)
@@ -144,12 +151,33 @@ class SceneField(nn.Module):
         if points.ndim != 2 or points.shape[1] != 3:
             raise ValueError(f"points must be (N, 3), got {tuple(points.shape)}")
         points_n = normalize_points(points.to(self.beta.dtype), self.bound)
-        geometry = self.geometry.features(points_n)
-        sdf = self.geometry_decoder(geometry)[:, 0]
-        if not with_rgb:
-            return FieldOutput(sdf=sdf, rgb=None)
-        colour = geometry if self.appearance is None else self.appearance.features(points_n)
-        return FieldOutput(sdf=sdf, rgb=self.appearance_decoder(colour))
+        with stage("plane sampling"):
+            geometry, colour = self.plane_features(points_n, with_rgb)
+        with stage("decoders"):
+            sdf = self.geometry_decoder(geometry)[:, 0]
+            rgb = self.appearance_decoder(colour) if colour is not None else None
+        return FieldOutput(sdf=sdf, rgb=rgb)
+
+    def plane_features(
+        self, points_n: torch.Tensor, with_colour: bool = True
+    ) -> tuple[torch.Tensor, torch.Tensor | None]:
+        """Geometry features (N, G) and colour features (N, A) (None unless ``with_colour``)
+        at (N, 3) normalised points; the colour ones are the geometry's with shared planes.
+
+        With ``plane_sampling: fused`` every level of both plane sets is sampled in one op.
+        """
+        colour_set = self.appearance if with_colour else None
+        if self.config.plane_sampling == "fused":
+            sets = [self.geometry] if colour_set is None else [self.geometry, colour_set]
+            features = fused_features(sets, points_n)
+            geometry = features[0]
+            colour = features[1] if colour_set is not None else None
+        else:
+            geometry = self.geometry.features(points_n)
+            colour = colour_set.features(points_n) if colour_set is not None else None
+        if with_colour and self.appearance is None:
+            colour = geometry
+        return geometry, colour
 
     def plane_parameters(self) -> list[nn.Parameter]:
         """The plane tensors, geometry then appearance, coarse then fine."""

@@ -24,6 +24,7 @@ from eslam.render.sampling import (
     uniform_samples,
 )
 from eslam.render.volume import bell_weights, composite, sdf_to_weights
+from eslam.stages import stage
 from eslam.types import FieldOutput, Intrinsics, RayBatch, RenderOutput
 
 
@@ -76,14 +77,11 @@ def _integrate(
     config: RenderConfig,
 ) -> RenderOutput:
     sdf, rgb = _shade(field, origins, directions, z, config.render_colour)
-    weights = weights_from_sdf(sdf, field.beta, config)
-    return RenderOutput(
-        depth=composite(weights, z),
-        rgb=composite(weights, rgb) if rgb is not None else None,
-        z_vals=z,
-        sdf=sdf,
-        weights=weights,
-    )
+    with stage("rendering"):
+        weights = weights_from_sdf(sdf, field.beta, config)
+        depth = composite(weights, z)
+        colour = composite(weights, rgb) if rgb is not None else None
+    return RenderOutput(depth=depth, rgb=colour, z_vals=z, sdf=sdf, weights=weights)
 
 
 def render_rays(
@@ -120,17 +118,18 @@ def render_rays(
             "render_rays needs a finite depth > 0 on every ray; "
             "use render_rays_without_depth for rays without depth"
         )
-    z = depth_guided_samples(
-        rays.depth.detach(),
-        config.samples_stratified,
-        config.samples_surface,
-        field.truncation,
-        surface_band=config.surface_band,
-        far_factor=config.far_factor,
-        perturb=perturb,
-        generator=generator,
-        noise=noise,
-    )
+    with stage("ray sampling"):
+        z = depth_guided_samples(
+            rays.depth.detach(),
+            config.samples_stratified,
+            config.samples_surface,
+            field.truncation,
+            surface_band=config.surface_band,
+            far_factor=config.far_factor,
+            perturb=perturb,
+            generator=generator,
+            noise=noise,
+        )
     return _integrate(field, rays.origins, rays.directions, z, config)
 
 

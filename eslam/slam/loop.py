@@ -83,7 +83,7 @@ from eslam.slam.stops import interrupted_early, save_on_failure, stopped_error
 from eslam.slam.stream_report import StreamLog
 from eslam.slam.trackers import make_tracker, predict_pose
 from eslam.slam.tracking import TrackingQuality
-from eslam.slam.views import make_view
+from eslam.slam.views import make_view, upload_frame
 from eslam.types import Frame
 
 log = logging.getLogger("eslam")
@@ -243,8 +243,7 @@ class RunLoop:
             velocity = self.config.tracking.constant_velocity and not self._last_failed
             pose = predict_pose(state.trajectory.poses, velocity)
             if has_depth and state.field is not None and len(state.keyframes) > 0:
-                rgb = torch.from_numpy(frame.rgb).to(self.device).float() / 255.0
-                depth = torch.from_numpy(frame.depth).to(self.device)
+                rgb, depth = upload_frame(frame.rgb, frame.depth, self.device)
                 view = make_view(rgb, depth, self.directions, self.config.tracking.border)
                 if view.sampleable_pixels() > 0:
                     result = self.tracker.track(state.field, view, pose, state.generator)

@@ -33,6 +33,7 @@ from eslam.slam.views import (
     render_drawn,
     view_rays,
 )
+from eslam.stages import stage
 
 
 @dataclass(frozen=True)
@@ -171,15 +172,19 @@ def mapping_loss(
     Rays through the pixels ``draws`` chose in each view at its current pose, rendered
     with its jitter, scored by the shared loss with the mapping weights.
     """
-    current = window.current()
-    rays = concatenate_rays(
-        [
-            view_rays(view, current[k], pixels_from_uniforms(view, draws.pixels[k]))
-            for k, view in enumerate(views)
-        ]
-    )
+    with stage("ray sampling"):
+        current = window.current()
+        rays = concatenate_rays(
+            [
+                view_rays(view, current[k], pixels_from_uniforms(view, draws.pixels[k]))
+                for k, view in enumerate(views)
+            ]
+        )
     output = render_drawn(field, rays, draws, settings.render)
-    terms = compute_losses(output, rays, settings.mapping.weights, field.truncation, settings.loss)
+    with stage("loss"):
+        terms = compute_losses(
+            output, rays, settings.mapping.weights, field.truncation, settings.loss
+        )
     return terms.total
 
 
@@ -199,11 +204,14 @@ def mapping_step(
     """
     per_view = max(1, (rays or settings.mapping.rays) // len(views))
     device = window.fixed.device
-    draws = draw_rays(len(views), per_view, settings.render, generator, device)
+    with stage("ray sampling"):
+        draws = draw_rays(len(views), per_view, settings.render, generator, device)
     loss = mapping_loss(field, views, window, draws, settings)
     optimiser.zero_grad(set_to_none=True)
-    loss.backward()
-    optimiser.step()
+    with stage("backward"):
+        loss.backward()
+    with stage("optimiser step"):
+        optimiser.step()
     return loss.detach()
 
 

@@ -30,6 +30,7 @@ from eslam.slam.views import (
     render_drawn,
     view_rays,
 )
+from eslam.stages import stage
 
 
 @dataclass(frozen=True)
@@ -143,17 +144,19 @@ def tracking_loss(
         The total loss (0-d) and the (4, 4) pose it was computed at, both with gradients.
     """
     config = settings.tracking
-    c2w = variables.pose()
-    rays = view_rays(view, c2w, pixels_from_uniforms(view, draws.pixels[0]))
+    with stage("ray sampling"):
+        c2w = variables.pose()
+        rays = view_rays(view, c2w, pixels_from_uniforms(view, draws.pixels[0]))
     output = render_drawn(field, rays, draws, settings.render)
-    terms = compute_losses(
-        output,
-        rays,
-        config.weights,
-        field.truncation,
-        settings.loss,
-        outlier_factor=config.outlier_factor,
-    )
+    with stage("loss"):
+        terms = compute_losses(
+            output,
+            rays,
+            config.weights,
+            field.truncation,
+            settings.loss,
+            outlier_factor=config.outlier_factor,
+        )
     return terms.total, c2w
 
 
@@ -176,11 +179,14 @@ def tracking_step(
         both before the step.
     """
     device = view.depth.device
-    draws = draw_rays(1, settings.tracking.rays, settings.render, generator, device)
+    with stage("ray sampling"):
+        draws = draw_rays(1, settings.tracking.rays, settings.render, generator, device)
     loss, c2w = tracking_loss(field, view, variables, draws, settings)
     optimiser.zero_grad(set_to_none=True)
-    loss.backward()
-    optimiser.step()
+    with stage("backward"):
+        loss.backward()
+    with stage("optimiser step"):
+        optimiser.step()
     return loss.detach(), c2w.detach()
 
 

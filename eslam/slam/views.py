@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
 import torch
 
 from eslam.config import RenderConfig
@@ -41,6 +42,15 @@ class View:
     def sampleable_pixels(self) -> int:
         """Number of pixels rays may be drawn from (reads the device: call between steps)."""
         return int(self.count)
+
+
+def upload_frame(
+    rgb: np.ndarray, depth: np.ndarray, device: torch.device | str
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """A frame's images on the compute device: (H, W, 3) uint8 -> float32 colour in [0, 1]
+    (converted on the device, so only bytes travel) and (H, W) float32 depth in metres."""
+    colour = torch.from_numpy(rgb).to(device).float() / 255.0
+    return colour, torch.from_numpy(depth).to(device)
 
 
 def make_view(

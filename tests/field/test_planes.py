@@ -31,11 +31,11 @@ def _points(count: int, seed: int = 0, dtype=torch.float32) -> torch.Tensor:
     return torch.cat((inside, border))
 
 
-def _level(grid, channels=4, seed=0, fast=True, std=0.1) -> PlaneLevel:
+def _level(grid, channels=4, seed=0, sampling="fast", std=0.1) -> PlaneLevel:
     """Planes with features of a trained map's scale (float32 bilinear interpolation
     rounds to ~1e-6 of the feature magnitude, in either path)."""
     torch.manual_seed(seed)
-    return PlaneLevel(grid, channels, init_std=std, fast=fast)
+    return PlaneLevel(grid, channels, init_std=std, sampling=sampling)
 
 
 def test_fit_bound_hand_values():
@@ -134,13 +134,14 @@ def test_fast_is_as_accurate_as_reference_on_a_large_grid():
     assert fast_error < 2 * ref_error
 
 
-@pytest.mark.parametrize("grid", ODD_GRIDS[:3])
-def test_fast_equals_reference_in_float64(grid):
-    level = _level(grid, std=1.0).double()
+@pytest.mark.parametrize("sampling", ["fast", "fused"])
+@pytest.mark.parametrize("grid", ODD_GRIDS)
+def test_fast_and_fused_equal_reference_in_float64(grid, sampling):
+    level = _level(grid, std=1.0, sampling=sampling).double()
     points = _points(200, dtype=torch.float64)
     grads = []
-    for fast in (False, True):
-        level.fast = fast
+    for path in ("reference", sampling):
+        level.sampling = path
         level.planes.grad = None
         pts = points.clone().requires_grad_(True)
         out = level.sample(pts)
@@ -151,9 +152,9 @@ def test_fast_equals_reference_in_float64(grid):
         torch.testing.assert_close(fast, ref, rtol=0, atol=1e-12)
 
 
-@pytest.mark.parametrize("fast", [True, False])
-def test_padding_gets_exactly_zero_gradient(fast):
-    level = _level((7, 5, 3), fast=fast)
+@pytest.mark.parametrize("sampling", ["reference", "fast", "fused"])
+def test_padding_gets_exactly_zero_gradient(sampling):
+    level = _level((7, 5, 3), sampling=sampling)
     level.sample(_points(500)).square().sum().backward()
     grad = level.planes.grad
     padding = level.padding.expand_as(grad)
@@ -161,10 +162,10 @@ def test_padding_gets_exactly_zero_gradient(fast):
     assert (grad[~padding] != 0).float().mean() > 0.9
 
 
-@pytest.mark.parametrize("fast", [True, False])
-def test_grid_vertex_returns_vertex_feature_sum(fast):
+@pytest.mark.parametrize("sampling", ["reference", "fast", "fused"])
+def test_grid_vertex_returns_vertex_feature_sum(sampling):
     nx, ny, nz = 7, 5, 3
-    level = _level((nx, ny, nz), fast=fast)
+    level = _level((nx, ny, nz), sampling=sampling)
     i, j, k = 4, 1, 2
     point = torch.tensor([[-1 + 2 * i / (nx - 1), -1 + 2 * j / (ny - 1), -1 + 2 * k / (nz - 1)]])
     planes = level.planes.detach()

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
+from types import SimpleNamespace
 
 import pytest
 import torch
@@ -37,6 +39,7 @@ from eslam.slam.views import (
     sample_view_rays,
     view_rays,
 )
+from eslam.stages import PREFIX, STAGES, stage, stage_totals
 from eslam.types import Intrinsics
 
 CAMERA = Intrinsics(width=40, height=30, fx=30.0, fy=30.0, cx=19.5, cy=14.5)
@@ -169,3 +172,40 @@ def test_map_window_decays_the_map_learning_rates(monkeypatch: pytest.MonkeyPatc
     )
     start = 5.0 * config.mapping.lr_planes
     assert seen == pytest.approx([start, start * 0.6, start * 0.2])
+
+
+def test_every_stage_of_both_steps_is_a_profiler_region(monkeypatch: pytest.MonkeyPatch) -> None:
+    """bench_core's breakdown reads these regions: each stage must run inside the steps.
+
+    The regions are recorded by replacing torch.profiler.record_function (a real
+    profiler takes seconds to start); stage_totals is checked on events like the
+    profiler's."""
+    entered: list[str] = []
+
+    class Recorder(contextlib.nullcontext):
+        def __init__(self, name: str) -> None:
+            super().__init__()
+            entered.append(name)
+
+    monkeypatch.setattr(torch.profiler, "record_function", Recorder)
+    config, field, view = _setup()
+    generator = torch.Generator().manual_seed(0)
+    tracker = dataclasses.replace(config.tracking.render, rays=50)
+    settings = TrackingSettings(tracker, config.render, config.loss)
+    variables = PoseVariables.from_pose(torch.eye(4))
+    optimiser = pose_optimiser(variables, tracker)
+    mapping = MappingSettings(config.mapping, config.render, config.loss)
+    window = WindowPoses.create(torch.eye(4).repeat(2, 1, 1), [False, True])
+    map_optimiser = mapping_optimiser(field, window, config.mapping, 1.0)
+    with frozen(field):
+        tracking_step(field, view, variables, optimiser, settings, generator)
+    assert {PREFIX + name for name in STAGES} <= set(entered)
+    entered.clear()
+    mapping_step(field, [view, view], window, map_optimiser, mapping, generator, rays=50)
+    assert {PREFIX + name for name in STAGES} <= set(entered)
+    events = [SimpleNamespace(name=name, cpu_time_total=10.0) for name in entered]
+    events.append(SimpleNamespace(name="aten::mm", cpu_time_total=99.0))
+    totals = stage_totals(events)
+    assert totals["backward"] == 10.0 and totals["ray sampling"] >= 20.0
+    with pytest.raises(ValueError, match="unknown stage"):
+        stage("everything")
