@@ -4,6 +4,7 @@ appending a section to docs/benchmarks.md."""
 from __future__ import annotations
 
 import argparse
+import datetime
 import os
 import platform
 import shlex
@@ -61,6 +62,33 @@ def machine_lines(device: torch.device, load: tuple[float | None, float | None])
     if device.type == "cuda":
         index = device.index if device.index is not None else torch.cuda.current_device()
         lines.append(f"- GPU: {torch.cuda.get_device_name(index)} (CUDA {torch.version.cuda})")
+    return lines
+
+
+def section_head(
+    title: str,
+    device: torch.device,
+    load: tuple[float | None, float | None],
+    command: str,
+    data: str,
+    overrides: tuple[str, list[str]] = ("overrides", []),
+    note: str | None = None,
+) -> list[str]:
+    """A benchmark section's heading and bullets: ``## TITLE, UTC time, device``, the
+    machine, the command, the data and, when given, the (label, list) overrides and a note."""
+    now = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    lines = [
+        f"## {title}, {now}, {device.type}",
+        "",
+        *machine_lines(device, load),
+        f"- command: `{command}`",
+        f"- data: {data}",
+    ]
+    label, given = overrides
+    if given:
+        lines.append(f"- {label}: `{' '.join(given)}`")
+    if note:
+        lines.append(f"- note: {note}")
     return lines
 
 

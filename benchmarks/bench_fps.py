@@ -28,7 +28,6 @@ Trailing ``key=value`` overrides apply after the Replica settings (e.g.
 from __future__ import annotations
 
 import argparse
-import datetime
 import sys
 import time
 from pathlib import Path
@@ -43,8 +42,8 @@ from _machine import (
     check_device,
     command_line,
     load_average,
-    machine_lines,
     publish,
+    section_head,
 )
 
 from eslam.config import load_config
@@ -166,20 +165,17 @@ def main(argv: list[str] | None = None) -> None:
     data = synthetic_sequence(args.out, args.frames, args.size)
     load_start = load_average()
     result, first_pose_s = run(args, data)
-    now = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
-    lines = [
-        f"## bench_fps, {now}, {device.type}",
-        "",
-        *machine_lines(device, (load_start, load_average())),
-        f"- command: `{command}`",
-        "- data: synthetic room (seed 0, 90 degree field of view), written by "
-        "eslam.synthetic; settings: `configs/replica/room0.yaml` with the scene's bound, "
-        "no mesh; FPS definitions in docs/evaluation.md (metrics.json)",
-    ]
-    if args.overrides:
-        lines.append(f"- overrides: `{' '.join(args.overrides)}`")
-    if args.note:
-        lines.append(f"- note: {args.note}")
+    lines = section_head(
+        "bench_fps",
+        device,
+        (load_start, load_average()),
+        command,
+        "synthetic room (seed 0, 90 degree field of view), written by eslam.synthetic; "
+        "settings: `configs/replica/room0.yaml` with the scene's bound, no mesh; FPS "
+        "definitions in docs/evaluation.md (metrics.json)",
+        ("overrides", args.overrides),
+        args.note,
+    )
     section = "\n".join([*lines, "", table(result, first_pose_s, args.size)])
     publish(section, args.docs_file, print_only=not args.docs)
 

@@ -32,7 +32,6 @@ Trailing ``key=value`` overrides apply to every case (after the case's own setti
 from __future__ import annotations
 
 import argparse
-import datetime
 import json
 import os
 import statistics
@@ -51,8 +50,8 @@ from _machine import (
     check_device,
     command_line,
     load_average,
-    machine_lines,
     publish,
+    section_head,
 )
 
 from eslam.config import load_config
@@ -248,19 +247,16 @@ def main(argv: list[str] | None = None) -> None:
             row = run_case(case, method, args)
             print(f"{case.name} {method}: {row.result.metrics}", flush=True)
             rows.append(row)
-    now = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
-    lines = [
-        f"## real_data, {now}, {device.type}",
-        "",
-        *machine_lines(device, (load_start, load_average())),
-        f"- command: `{command}`",
-        "- data: ../shared/data (7-Scenes redkitchen frames 0-399, Replica room0 frames 0-19) "
+    lines = section_head(
+        "real_data",
+        device,
+        (load_start, load_average()),
+        command,
+        "../shared/data (7-Scenes redkitchen frames 0-399, Replica room0 frames 0-19) "
         "or the synthetic demo scene; no mesh; FPT = tracking + mapping wall time / frames",
-    ]
-    if args.overrides:
-        lines.append(f"- overrides on every case: `{' '.join(args.overrides)}`")
-    if args.note:
-        lines.append(f"- note: {args.note}")
+        ("overrides on every case", args.overrides),
+        args.note,
+    )
     section = "\n".join([*lines, "", table(rows, args.methods is not None)])
     publish(section, args.docs, args.no_append)
 
