@@ -58,6 +58,17 @@ from eslam.slam.tracking import (
 from eslam.slam.views import View
 
 
+def field_tensors(field: torch.nn.Module) -> list[torch.Tensor]:
+    """The field's parameters and buffers: what a captured step reads by address (plane
+    growth and a rolled-back field replace them)."""
+    return [*field.parameters(), *field.buffers()]
+
+
+def same_tensors(a: list[torch.Tensor], b: list[torch.Tensor]) -> bool:
+    """Whether two lists hold the same tensor objects (identity, not values)."""
+    return len(a) == len(b) and all(x is y for x, y in zip(a, b, strict=True))
+
+
 def static_view(like: View) -> View:
     """Buffers shaped as ``like`` (its images not copied; fill them with :func:`load_view`).
 
@@ -227,7 +238,8 @@ class StaticMapping:
     """Mapping iterations on static tensors for a window of ``len(like)`` views.
 
     The optimiser holds the field's parameters: build a new one when they are replaced
-    (plane growth, a rolled-back field); :meth:`fits` says whether this one still fits.
+    (plane growth, a rolled-back field); :meth:`fits` says whether this one still fits
+    (it holds the field's tensors, so a replaced one is never mistaken for its successor).
 
     Args:
         settings: the mapping settings.
@@ -238,7 +250,7 @@ class StaticMapping:
     def __init__(self, settings: MappingSettings, field: SceneField, like: list[View]) -> None:
         device = like[0].depth.device
         self.settings = settings
-        self.parameters = list(field.parameters())
+        self.tensors = field_tensors(field)
         self.shape = [view_shape(view) for view in like]
         self.views = [static_view(view) for view in like]
         self.window = SlotPoses.empty(len(like), device)
@@ -247,12 +259,9 @@ class StaticMapping:
 
     def fits(self, field: SceneField, views: list[View]) -> bool:
         """Whether these buffers and optimiser serve ``field`` on a window like ``views``."""
-        same = [a is b for a, b in zip(field.parameters(), self.parameters, strict=False)]
-        return (
-            len(same) == len(self.parameters)
-            and all(same)
-            and self.shape == [view_shape(view) for view in views]
-        )
+        return same_tensors(field_tensors(field), self.tensors) and self.shape == [
+            view_shape(view) for view in views
+        ]
 
     def start(
         self, views: list[View], poses: torch.Tensor, optimise: list[bool], lr_factor: float
