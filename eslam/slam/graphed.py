@@ -80,16 +80,18 @@ def graph_support(device: torch.device) -> str | None:
 
 def use_cuda_graphs(mode: str, device: torch.device, logger: logging.Logger = log) -> bool:
     """Whether ``compute.cuda_graphs`` = ``mode`` runs the iterations as CUDA graphs on
-    ``device``; ``auto`` falling back to the eager steps is logged once per reason."""
+    ``device``; what ``auto`` chose is logged once (per reason it ran eagerly)."""
     if mode == "off":
         return False
     reason = graph_support(device)
-    if reason is None:
-        return True
-    if reason not in _told:
-        _told.add(reason)
-        logger.info("compute.cuda_graphs=auto: the iterations run eagerly (%s)", reason)
-    return False
+    said = reason or "graphs"
+    if said not in _told:
+        _told.add(said)
+        if reason is None:
+            logger.info("compute.cuda_graphs=auto: each iteration is a CUDA-graph replay")
+        else:
+            logger.info("compute.cuda_graphs=auto: the iterations run eagerly (%s)", reason)
+    return reason is None
 
 
 class CapturedIteration:

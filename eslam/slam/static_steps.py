@@ -137,7 +137,9 @@ def reset_adam(optimiser: torch.optim.Optimizer) -> None:
                     value.zero_()
 
 
-def load_pose_variables(quaternion: torch.Tensor, translation: torch.Tensor, poses: torch.Tensor):
+def load_pose_variables(
+    quaternion: torch.Tensor, translation: torch.Tensor, poses: torch.Tensor
+) -> None:
     """Overwrite the variables with the quaternions and translations of ``poses`` (..., 4, 4)."""
     with torch.no_grad():
         q, t = quaternion_translation_from_pose(poses.detach())
@@ -330,9 +332,12 @@ def run_mapping(
     ``iterate`` runs one iteration (``mapping.step`` on the run's generator, or a graph
     replay of it); the map learning rates follow ``schedule`` between iterations.
     """
-    mapping.start(views, poses, optimise, schedule.lr_factor)
+    mapping.start(views, poses, optimise, schedule.lr_factor)  # the rates at scale 1
+    scale = 1.0
     for step in range(schedule.iterations):
-        mapping.set_scale(schedule.lr_factor, schedule.lr_scale(step))
+        if schedule.lr_scale(step) != scale:  # fill the rates only when they change
+            scale = schedule.lr_scale(step)
+            mapping.set_scale(schedule.lr_factor, scale)
         iterate()
         if on_step is not None:
             on_step(step + 1)
