@@ -482,8 +482,8 @@ class ComputeConfig:
     cuda_graphs: Literal["auto", "off"] = "off"
     """auto: on a CUDA device whose torch can capture them (CUDAGraph with
     register_generator_state, capturable Adam), each tracking and mapping iteration is
-    one CUDA-graph replay (eslam.slam.graphed), re-captured when the planes grow or the
-    window size changes; otherwise, and always on CPU or MPS, the eager steps run.
+    one CUDA-graph replay (eslam.slam.graphed), captured again when the planes grow (a
+    graph per window size); otherwise, and always on CPU or MPS, the eager steps run.
     off: the eager steps everywhere. Results equal the eager path within float
     tolerance; the default stays off until the graphed path has been checked on a GPU."""
 

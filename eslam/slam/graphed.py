@@ -15,9 +15,11 @@ generator as far.
 
 A graph reads fixed addresses, so it is captured again when what it was captured on
 changes: the field's tensors (plane growth replaces the planes; a rolled-back frame
-replaces the field), the view size, the window size W, the rays per step or the
-generator. W grows with the keyframes until ``mapping.window``; after that a mapping
-call replays the graph it has.
+replaces the field), the view size or the generator. Mapping keeps a graph per window
+size W and rays per step (the step draws ``rays // W`` rays per view; the buffers, pose
+slots and optimiser are shared): W grows with the keyframes until ``mapping.window``,
+after which a mapping call replays the graph it has (the overlap window policy may
+vary W: the :data:`GRAPHS_KEPT` most recent are kept).
 
 Otherwise (``off``, a CPU or MPS device, a torch without what is needed) the eager
 steps run: :func:`~eslam.slam.tracking.track_frame` and
@@ -30,6 +32,7 @@ import dataclasses
 import functools
 import inspect
 import logging
+from collections import OrderedDict
 from collections.abc import Callable, Sequence
 
 import torch
@@ -58,6 +61,10 @@ log = logging.getLogger("eslam")
 
 WARMUP_ITERATIONS = 2
 """Eager iterations on a side stream before a capture (PyTorch's CUDA-graph recipe)."""
+
+GRAPHS_KEPT = 4
+"""Mapping graphs kept (one per window size and ray count, the most recently used):
+each holds its own activation memory."""
 
 _told: set[str] = set()
 
@@ -235,6 +242,10 @@ class WindowMapper:
     CUDA-graph replays where :func:`use_cuda_graphs` says so and capturing works
     (module doc).
 
+    One :class:`~eslam.slam.static_steps.StaticMapping` of ``mapping.window`` slots, and
+    a graph per (window size, rays per step), the :data:`GRAPHS_KEPT` most recently used
+    kept.
+
     Args:
         settings: the mapping settings.
         mode: ``compute.cuda_graphs``.
@@ -244,8 +255,8 @@ class WindowMapper:
         self.settings = settings
         self.mode = mode
         self.static: StaticMapping | None = None
-        self.graph: CapturedIteration | None = None
-        self.captured_on: tuple[int, torch.Generator] | None = None
+        self.graphs: OrderedDict[tuple[int, int], CapturedIteration] = OrderedDict()
+        self.generator: torch.Generator | None = None
         self.captures = 0
         self.failed = False
 
@@ -284,23 +295,32 @@ class WindowMapper:
         schedule: MappingSchedule,
         generator: torch.Generator,
     ) -> Callable[[], None] | None:
-        """The replay of one iteration for this call (captured when the buffers, the
-        rays per step or the generator changed); None when a capture failed."""
+        """The replay of one iteration for this call (captured when no kept graph has
+        this window size and ray count on these buffers and generator); None when a
+        capture failed."""
         static = self.static
         if static is None or not static.fits(field, views):
-            self.static = self.graph = None  # free the old buffers and graph first
-            static = self.static = StaticMapping(self.settings, field, views)
-        rays = schedule.rays
-        same = self.captured_on is not None and self.captured_on == (rays, generator)
-        if self.graph is None or not same:
-            self.graph = self.captured_on = None
-            static.start(views, poses, optimise, schedule.lr_factor)  # real data for the warm-up
-            self.graph = capture(
-                lambda g: static.step(field, g, rays), generator, keep=list(field.parameters())
-            )
-            if self.graph is None:
-                self.failed = True
-                return None
-            self.captured_on = (rays, generator)
-            self.captures += 1
-        return self.graph.replay
+            self.static = None  # free the old buffers and graphs first
+            self.graphs.clear()
+            slots = max(len(views), self.settings.mapping.window)
+            static = self.static = StaticMapping(self.settings, field, views[0], slots)
+        if generator is not self.generator:
+            self.graphs.clear()
+            self.generator = generator
+        size, rays = len(views), schedule.rays
+        graph = self.graphs.get((size, rays))
+        if graph is not None:
+            self.graphs.move_to_end((size, rays))
+            return graph.replay
+        while len(self.graphs) >= GRAPHS_KEPT:
+            self.graphs.popitem(last=False)
+        static.start(views, poses, optimise, schedule.lr_factor)  # real data for the warm-up
+        graph = capture(
+            lambda g: static.step(field, g, rays, size), generator, keep=list(field.parameters())
+        )
+        if graph is None:
+            self.failed = True
+            return None
+        self.graphs[(size, rays)] = graph
+        self.captures += 1
+        return graph.replay

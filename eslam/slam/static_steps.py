@@ -9,19 +9,21 @@ on such tensors:
 - static views: a frame's (or a window's) images copied into buffers of the camera's
   size (:func:`static_view`, :func:`load_view`);
 - static pose variables, overwritten in place at the start of a frame or mapping call;
-- the window's poses as variables for all W keyframes, the rows that are not refined
-  held by a mask (masks as weights, :class:`SlotPoses`): such a row gets a zero gradient,
-  so Adam leaves it exactly where it was;
-- one Adam per tracker or window size whose learning rates are 0-d tensors (filled
-  between iterations; capturable on CUDA), reset in place (moments and step counts
-  zeroed, :func:`reset_adam`) instead of a new optimiser per frame or call;
+- a fixed number of window slots (``mapping.window``): view buffers and pose variables;
+  a window of W keyframes uses the first W, and the slots beyond it and the rows that
+  are not refined are held by a mask (masks as weights, :class:`SlotPoses`): such a row
+  gets a zero gradient, so Adam leaves it exactly where it was;
+- one Adam for the tracker and one for mapping, whose learning rates are 0-d tensors
+  (filled between iterations; capturable on CUDA), reset in place (moments and step
+  counts zeroed, :func:`reset_adam`) instead of a new optimiser per frame or call;
 - the tracker's best loss and pose kept in place (:func:`~eslam.slam.tracking.keep_best`).
 
 The random draws stay inside the step (same generator, same order, same shapes as the
-eager step), so the numbers drawn are the eager path's. That is why the window is not
-padded to a fixed number of slots: padding changes how many numbers a step draws, and
-with them every later draw. A graph is captured per window size W instead (W only
-changes while the run has fewer keyframes than ``mapping.window``).
+eager step), so the numbers drawn are the eager path's. That is why the rays are not
+padded to the full slots: padding would change how many numbers a step draws, and with
+them every later draw. The step's ray count (``rays // W`` per view) follows W, so a
+graph is captured per window size; the buffers, the pose variables and the optimiser
+are shared by all of them.
 
 Run eagerly (any device) the iterations equal the eager ones within float tolerance
 (tests/slam/test_static_steps.py); :mod:`eslam.slam.graphed` captures one of them as a
@@ -192,13 +194,16 @@ class StaticTracking:
 
 @dataclass(frozen=True, eq=False)
 class SlotPoses:
-    """The window's W poses as variables; rows not refined are held by a mask.
+    """The window's poses as variables in S slots; rows not refined are held by a mask.
+
+    A call with W <= S keyframes uses slots 0..W-1; the others, like the rows that are
+    not refined, are masked out (masks as weights).
 
     Attributes:
-        fixed: (W, 4, 4) poses at the start of the call.
-        refine: (W,) bool, the rows whose poses are refined.
-        quaternions: (W, 4) leaf tensor with gradients.
-        translations: (W, 3) leaf tensor with gradients.
+        fixed: (S, 4, 4) poses at the start of the call.
+        refine: (S,) bool, the rows whose poses are refined (never a slot beyond W).
+        quaternions: (S, 4) leaf tensor with gradients.
+        translations: (S, 3) leaf tensor with gradients.
     """
 
     fixed: torch.Tensor
@@ -207,69 +212,82 @@ class SlotPoses:
     translations: torch.Tensor
 
     @classmethod
-    def empty(cls, size: int, device: torch.device) -> SlotPoses:
-        """Variables for ``size`` poses (identity; fill them with :meth:`load`)."""
-        eye = torch.eye(4, device=device).repeat(size, 1, 1)
+    def empty(cls, slots: int, device: torch.device) -> SlotPoses:
+        """Variables for ``slots`` poses (identity; fill them with :meth:`load`)."""
+        eye = torch.eye(4, device=device).repeat(slots, 1, 1)
         quaternions, translations = quaternion_translation_from_pose(eye)
         return cls(
             eye,
-            torch.zeros(size, dtype=torch.bool, device=device),
+            torch.zeros(slots, dtype=torch.bool, device=device),
             quaternions.clone().requires_grad_(True),
             translations.clone().requires_grad_(True),
         )
 
     def load(self, poses: torch.Tensor, optimise: list[bool]) -> None:
-        """Start a call at ``poses`` (W, 4, 4), refining the rows flagged in ``optimise``."""
+        """Start a call at ``poses`` (W, 4, 4) in the first W slots, refining the rows
+        flagged in ``optimise``."""
+        size = len(poses)
+        mask = [*optimise, *([False] * (len(self.refine) - size))]
         with torch.no_grad():
-            self.fixed.copy_(poses.detach())
-            self.refine.copy_(torch.tensor(optimise, dtype=torch.bool))
-        load_pose_variables(self.quaternions, self.translations, poses)
+            self.fixed[:size].copy_(poses.detach())
+            self.refine.copy_(torch.tensor(mask, dtype=torch.bool))
+            load_pose_variables(self.quaternions[:size], self.translations[:size], poses)
 
     def parameters(self) -> list[torch.Tensor]:
-        """The pose variables (all rows; those not refined get zero gradients)."""
+        """The pose variables (all slots; those not refined get zero gradients)."""
         return [self.quaternions, self.translations]
 
     def current(self) -> torch.Tensor:
-        """(W, 4, 4) refined rows from the variables, the others the fixed poses:
+        """(S, 4, 4) refined rows from the variables, the others the fixed poses:
         where(refine, pose(q, t), fixed), so a fixed row passes no gradient to q, t."""
         refined = pose_from_quaternion_translation(self.quaternions, self.translations)
         return torch.where(self.refine[:, None, None], refined, self.fixed)
 
 
 class StaticMapping:
-    """Mapping iterations on static tensors for a window of ``len(like)`` views.
+    """Mapping iterations on static tensors: ``slots`` view buffers and pose slots, a
+    call on W <= ``slots`` keyframes using the first W (:class:`SlotPoses`).
 
-    The optimiser holds the field's parameters: build a new one when they are replaced
-    (plane growth, a rolled-back field); :meth:`fits` says whether this one still fits
-    (it holds the field's tensors, so a replaced one is never mistaken for its successor).
+    One optimiser (its state reset in place) serves every window size. It holds the
+    field's parameters: build a new StaticMapping when they are replaced (plane growth,
+    a rolled-back field); :meth:`fits` says whether this one still fits (it holds the
+    field's tensors, so a replaced one is never mistaken for its successor).
 
     Args:
         settings: the mapping settings.
         field: the field to optimise.
-        like: views of the window's keyframes (set the buffers' shapes and device).
+        like: a view of the camera (sets the buffers' shapes and device).
+        slots: the most keyframes a window may have (``mapping.window``).
     """
 
-    def __init__(self, settings: MappingSettings, field: SceneField, like: list[View]) -> None:
-        device = like[0].depth.device
+    def __init__(
+        self, settings: MappingSettings, field: SceneField, like: View, slots: int
+    ) -> None:
+        device = like.depth.device
         self.settings = settings
         self.tensors = field_tensors(field)
-        self.shape = [view_shape(view) for view in like]
-        self.views = [static_view(view) for view in like]
-        self.window = SlotPoses.empty(len(like), device)
+        self.shape = view_shape(like)
+        self.views = [static_view(like) for _ in range(slots)]
+        self.window = SlotPoses.empty(slots, device)
         self.optimiser = static_adam(mapping_optimiser(field, self.window, settings.mapping, 1.0))
         self.loss = torch.full((), float("nan"), device=device)
+        self.size = 0
 
     def fits(self, field: SceneField, views: list[View]) -> bool:
         """Whether these buffers and optimiser serve ``field`` on a window like ``views``."""
-        return same_tensors(field_tensors(field), self.tensors) and self.shape == [
-            view_shape(view) for view in views
-        ]
+        return (
+            same_tensors(field_tensors(field), self.tensors)
+            and len(views) <= len(self.views)
+            and all(view_shape(view) == self.shape for view in views)
+        )
 
     def start(
         self, views: list[View], poses: torch.Tensor, optimise: list[bool], lr_factor: float
     ) -> None:
-        """Load a call: the views, the poses, a fresh optimiser at ``lr_factor``."""
-        for static, view in zip(self.views, views, strict=True):
+        """Load a call: the views and poses into the first slots, a fresh optimiser at
+        ``lr_factor``."""
+        self.size = len(views)
+        for static, view in zip(self.views, views, strict=False):
             load_view(static, view)
         self.window.load(poses, optimise)
         reset_adam(self.optimiser)
@@ -285,17 +303,25 @@ class StaticMapping:
         starts = map_learning_rates(self.settings.mapping, lr_factor)
         set_learning_rates(self.optimiser, [start * scale for start in starts])
 
-    def step(self, field: SceneField, generator: torch.Generator, rays: int) -> None:
-        """One iteration (:func:`~eslam.slam.mapping.mapping_step`), its loss kept in place."""
+    def step(self, field: SceneField, generator: torch.Generator, rays: int, size: int) -> None:
+        """One iteration (:func:`~eslam.slam.mapping.mapping_step`) over the first ``size``
+        slots, its loss kept in place."""
         loss = mapping_step(
-            field, self.views, self.window, self.optimiser, self.settings, generator, rays=rays
+            field,
+            self.views[:size],
+            self.window,
+            self.optimiser,
+            self.settings,
+            generator,
+            rays=rays,
         )
         self.loss.copy_(loss)
 
     def result(self) -> MappingResult:
-        """The refined poses and the last loss (copies: the buffers are reused)."""
+        """The refined poses of the call's keyframes and the last loss (copies: the
+        buffers are reused)."""
         with torch.no_grad():
-            poses = self.window.current().detach().clone()
+            poses = self.window.current()[: self.size].detach().clone()
         return MappingResult(poses=poses, loss=self.loss.clone())
 
 

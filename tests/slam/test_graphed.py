@@ -122,8 +122,9 @@ def test_graphed_tracking_equals_the_eager_tracker(device: str) -> None:
 
 
 def test_graphed_mapping_equals_map_window_and_recaptures(device: str) -> None:
-    """Windows of 3, 2 and 3 keyframes, then plane growth: each change re-captures, and
-    every call leaves the field, poses and generator where map_window does."""
+    """Windows of 3, 2 and 3 keyframes (a graph per size, kept), then plane growth (all
+    captured again): every call leaves the field, poses and generator where map_window
+    does."""
     config, eager_field, _ = _setup(device)
     graph_field = copy.deepcopy(eager_field)
     settings = MappingSettings(config.mapping, config.render, config.loss)
@@ -133,12 +134,12 @@ def test_graphed_mapping_equals_map_window_and_recaptures(device: str) -> None:
     eager_generator = torch.Generator(device=device).manual_seed(5)
     graph_generator = torch.Generator(device=device).manual_seed(5)
     every = [False, True, True]
-    calls = [
+    calls = [  # (window rows, poses refined, schedule, captures so far)
         ([0, 1, 2], every, MappingSchedule(3, 5.0, 96, lr_decay=0.3), 1),
-        ([1, 2], [False, True], MappingSchedule(2, 1.0, 64), 2),
-        ([0, 1, 2], every, MappingSchedule(2, 1.0, 96), 3),
-        ([0, 1, 2], [False, False, False], MappingSchedule(2, 1.0, 96), 3),  # replayed
-        ([0, 1, 2], every, MappingSchedule(2, 1.0, 96), 4),  # after plane growth
+        ([1, 2], [False, True], MappingSchedule(2, 1.0, 64), 2),  # another window size
+        ([0, 1, 2], every, MappingSchedule(2, 1.0, 96), 2),  # its graph kept: replayed
+        ([0, 1, 2], [False, False, False], MappingSchedule(2, 1.0, 96), 2),
+        ([0, 1, 2], every, MappingSchedule(2, 1.0, 96), 3),  # after plane growth
     ]
     for call, (rows, optimise, schedule, captures) in enumerate(calls):
         if call == 4:

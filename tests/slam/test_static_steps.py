@@ -70,9 +70,9 @@ def _field_parameters(field: SceneField) -> list[torch.Tensor]:
 
 
 def test_static_mapping_equals_map_window() -> None:
-    """Windows of 3, then 2, then 3 keyframes (one set of buffers per size, reset in
-    place on reuse), with poses refined or all held: the static iterations leave the
-    field, the poses and the loss where map_window does, and draw the same numbers."""
+    """Windows of 3, then 2, then 3 keyframes in 4 slots (one optimiser, reset in place),
+    with poses refined or all held: the static iterations leave the field, the poses and
+    the loss where map_window does, and draw the same numbers."""
     config, eager_field, _ = _setup()
     static_field = copy.deepcopy(eager_field)
     settings = MappingSettings(config.mapping, config.render, config.loss)
@@ -85,23 +85,23 @@ def test_static_mapping_equals_map_window() -> None:
     ]
     eager_generator = torch.Generator().manual_seed(5)
     static_generator = torch.Generator().manual_seed(5)
-    kept: dict[int, StaticMapping] = {}
+    mapping = StaticMapping(settings, static_field, views[0], slots=4)
     for rows, optimise, schedule in calls:
         window = [views[r] for r in rows]
+        size = len(rows)
+        assert mapping.fits(static_field, window)
         eager = map_window(
             eager_field, window, poses[rows], optimise, settings, schedule, eager_generator
         )
-        mapping = kept.get(len(rows))
-        if mapping is None or not mapping.fits(static_field, window):
-            mapping = kept[len(rows)] = StaticMapping(settings, static_field, window)
         ours = run_mapping(
             mapping,
             window,
             poses[rows],
             optimise,
             schedule,
-            lambda m=mapping, s=schedule: m.step(static_field, static_generator, s.rays),
+            lambda n=size, s=schedule: mapping.step(static_field, static_generator, s.rays, n),
         )
+        assert ours.poses.shape == eager.poses.shape
         assert close(ours.poses, eager.poses) and close(ours.loss, eager.loss)
         held = [i for i, flag in enumerate(optimise) if not flag]
         assert torch.equal(ours.poses[held], poses[rows][held])  # held rows exactly
@@ -117,8 +117,8 @@ def test_static_mapping_equals_map_window() -> None:
 def test_static_mapping_needs_new_buffers_after_plane_growth() -> None:
     config, field, view = _setup()
     settings = MappingSettings(config.mapping, config.render, config.loss)
-    mapping = StaticMapping(settings, field, [view, view])
-    assert mapping.fits(field, [view, view]) and not mapping.fits(field, [view])
+    mapping = StaticMapping(settings, field, view, slots=2)
+    assert mapping.fits(field, [view, view]) and not mapping.fits(field, [view] * 3)
     field.grow(torch.tensor([[-1.0, 3.0], [-1.0, 1.0], [-1.0, 1.5]]))
     assert not mapping.fits(field, [view, view])  # the planes were replaced
 
