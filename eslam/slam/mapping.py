@@ -159,7 +159,8 @@ class PoseWindow(Protocol):
         ...
 
     def current(self) -> torch.Tensor:
-        """(W, 4, 4) poses, differentiable with respect to the variables."""
+        """(W', 4, 4) poses, row k the pose of the step's view k (W' >= the views:
+        the graph-ready window has slots to spare), differentiable w.r.t. the variables."""
         ...
 
 
