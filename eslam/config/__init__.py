@@ -12,6 +12,7 @@ from eslam.config.loader import (
 )
 from eslam.config.schema import (
     MOVED_KEYS,
+    ComputeConfig,
     DataConfig,
     ESLAMConfig,
     FieldConfig,
@@ -32,6 +33,7 @@ from eslam.config.schema import (
 __all__ = [
     "COMMAND_LINE",
     "MOVED_KEYS",
+    "ComputeConfig",
     "DataConfig",
     "ESLAMConfig",
     "FieldConfig",

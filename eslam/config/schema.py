@@ -476,6 +476,23 @@ class ViewerConfig:
 
 
 @dataclass
+class ComputeConfig:
+    """How the optimisation iterations run on the device (docs/live.md, speed settings)."""
+
+    cuda_graphs: Literal["auto", "off"] = "off"
+    """auto: on a CUDA device whose torch can capture them (CUDAGraph with
+    register_generator_state, capturable Adam), each tracking and mapping iteration is
+    one CUDA-graph replay (eslam.slam.graphed), captured again when the planes grow (a
+    graph per window size); otherwise, and always on CPU or MPS, the eager steps run.
+    off: the eager steps everywhere. Results equal the eager path within float
+    tolerance; the default stays off until the graphed path has been checked on a GPU."""
+
+    def __post_init__(self) -> None:
+        if self.cuda_graphs not in ("auto", "off"):
+            raise ValueError(f"cuda_graphs must be auto or off, got '{self.cuda_graphs}'")
+
+
+@dataclass
 class ESLAMConfig:
     """Everything a run needs; saved fully resolved as config.yaml in the run folder."""
 
@@ -503,6 +520,8 @@ class ESLAMConfig:
     """Checkpoints, mesh and progress display."""
     viewer: ViewerConfig = dataclasses.field(default_factory=ViewerConfig)
     """The live viewer (used only with --viewer or --viewer-save)."""
+    compute: ComputeConfig = dataclasses.field(default_factory=ComputeConfig)
+    """How the iterations run on the device (CUDA graphs)."""
 
     def __post_init__(self) -> None:
         if self.seed < 0:

@@ -49,9 +49,10 @@ from eslam.slam.bounds_policy import (
     cover_keyframe,
     first_pose,
 )
+from eslam.slam.graphed import WindowMapper
 from eslam.slam.keyframe_views import KeyframeViews
 from eslam.slam.keyframes import KeyframeSchedule
-from eslam.slam.mapping import MappingSettings, map_window, mapping_schedule
+from eslam.slam.mapping import MappingSettings, mapping_schedule
 from eslam.slam.observers import (
     FrameDone,
     LogObserver,
@@ -140,6 +141,7 @@ class RunLoop:
         self.tracker = make_tracker(config)
         self.schedule = KeyframeSchedule(config.mapping.every)
         self.mapping = MappingSettings(config.mapping, config.render, config.loss)
+        self.mapper = WindowMapper(self.mapping, config.compute.cuda_graphs)
         self.directions = camera_directions(state.keyframes.intrinsics, device)
         self.views = KeyframeViews(
             state.keyframes, self.directions, device, config.mapping.view_cache_mb
@@ -334,12 +336,11 @@ class RunLoop:
             self.observers.on_mapping_step(MappingStep(index, done, schedule.iterations, first))
 
         progress(0)
-        result = map_window(
+        result = self.mapper.map(
             field,
             views,
             store.poses[window].to(self.device),
             optimise,
-            self.mapping,
             schedule,
             generator=state.generator,
             on_step=progress,

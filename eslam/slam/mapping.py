@@ -17,6 +17,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Protocol
 
 import torch
 
@@ -147,13 +148,36 @@ class WindowPoses:
         return self.fixed.index_put((self.movable,), refined)
 
 
+class PoseWindow(Protocol):
+    """What a mapping step needs of the window's poses (:class:`WindowPoses`, or the
+    graph-ready :class:`~eslam.slam.static_steps.SlotPoses`)."""
+
+    fixed: torch.Tensor
+
+    def parameters(self) -> list[torch.Tensor]:
+        """The pose variables the optimiser refines."""
+        ...
+
+    def current(self) -> torch.Tensor:
+        """(W', 4, 4) poses, row k the pose of the step's view k (W' >= the views:
+        the graph-ready window has slots to spare), differentiable w.r.t. the variables."""
+        ...
+
+
+def map_learning_rates(config: MappingConfig, lr_factor: float) -> tuple[float, float]:
+    """The start learning rates of the planes and of the decoders (and beta): ``lr_factor``
+    times their configured rates (the poses keep ``lr_poses``)."""
+    return config.lr_planes * lr_factor, config.lr_decoders * lr_factor
+
+
 def mapping_optimiser(
-    field: SceneField, window: WindowPoses, config: MappingConfig, lr_factor: float
+    field: SceneField, window: PoseWindow, config: MappingConfig, lr_factor: float
 ) -> torch.optim.Adam:
     """Adam over planes, decoders (and beta) at ``lr_factor`` times their rates, and poses."""
+    planes, decoders = map_learning_rates(config, lr_factor)
     groups = [
-        {"params": field.plane_parameters(), "lr": config.lr_planes * lr_factor},
-        {"params": field.decoder_parameters(), "lr": config.lr_decoders * lr_factor},
+        {"params": field.plane_parameters(), "lr": planes},
+        {"params": field.decoder_parameters(), "lr": decoders},
     ]
     if window.parameters():
         groups.append({"params": window.parameters(), "lr": config.lr_poses})
@@ -163,7 +187,7 @@ def mapping_optimiser(
 def mapping_loss(
     field: SceneField,
     views: list[View],
-    window: WindowPoses,
+    window: PoseWindow,
     draws: RayDraws,
     settings: MappingSettings,
 ) -> torch.Tensor:
@@ -191,7 +215,7 @@ def mapping_loss(
 def mapping_step(
     field: SceneField,
     views: list[View],
-    window: WindowPoses,
+    window: PoseWindow,
     optimiser: torch.optim.Optimizer,
     settings: MappingSettings,
     generator: torch.Generator,

@@ -18,6 +18,7 @@ from eslam.config import ESLAMConfig
 from eslam.errors import ConfigError
 from eslam.geometry.pose import extrapolate_constant_velocity
 from eslam.render.renderer import SceneFieldLike
+from eslam.slam.graphed import GraphedRenderTracker
 from eslam.slam.sdf_tracking import HybridTracker, SdfTracker
 from eslam.slam.tracking import RenderTracker, TrackingResult, TrackingSettings
 from eslam.slam.views import View
@@ -37,8 +38,16 @@ class Tracker(Protocol):
         ...
 
 
+def _renderer(config: ESLAMConfig, settings: TrackingSettings) -> RenderTracker:
+    """The rendering tracker with ``settings``; with ``compute.cuda_graphs`` not off, the
+    one that replays CUDA graphs where it can (:mod:`eslam.slam.graphed`)."""
+    if config.compute.cuda_graphs == "off":
+        return RenderTracker(settings)
+    return GraphedRenderTracker(settings, mode=config.compute.cuda_graphs)
+
+
 def _render_tracker(config: ESLAMConfig) -> RenderTracker:
-    return RenderTracker(TrackingSettings(config.tracking.render, config.render, config.loss))
+    return _renderer(config, TrackingSettings(config.tracking.render, config.render, config.loss))
 
 
 def _sdf_tracker(config: ESLAMConfig) -> SdfTracker:
@@ -50,7 +59,7 @@ def _hybrid_tracker(config: ESLAMConfig) -> HybridTracker:
         config.tracking.render, iterations=config.tracking.hybrid.render_iterations
     )
     settings = TrackingSettings(render, config.render, config.loss)
-    return HybridTracker(_sdf_tracker(config), RenderTracker(settings))
+    return HybridTracker(_sdf_tracker(config), _renderer(config, settings))
 
 
 TRACKERS: dict[str, Callable[[ESLAMConfig], Tracker]] = {
