@@ -259,6 +259,22 @@ class FusedPlaneSampling(torch.autograd.Function):
         return (None, None, points_grad, *plane_grads)
 
 
+def level_windows(planes: Sequence, shapes: Sequence, windows: Sequence | None) -> list:
+    """The per-level windows (all None when ``windows`` is None), once the level lists are
+    checked to have one entry per level.
+
+    Raises:
+        ValueError: no level, or lists of different lengths.
+    """
+    windows = [None] * len(planes) if windows is None else list(windows)
+    if not (len(planes) == len(shapes) == len(windows)) or not planes:
+        raise ValueError(
+            f"need one plane tensor, shape and window per level, got "
+            f"{len(planes)}, {len(shapes)} and {len(windows)}"
+        )
+    return windows
+
+
 def sample_levels_fused(
     points: torch.Tensor,
     planes: Sequence[torch.Tensor],
@@ -278,11 +294,6 @@ def sample_levels_fused(
         One (N, C) tensor per level, equal to
         :func:`~eslam.field.planes.sample_planes_reference` of the level's coordinates.
     """
-    windows = [None] * len(planes) if windows is None else list(windows)
-    if not (len(planes) == len(shapes) == len(windows)) or not planes:
-        raise ValueError(
-            f"need one plane tensor, shape and window per level, got "
-            f"{len(planes)}, {len(shapes)} and {len(windows)}"
-        )
+    windows = level_windows(planes, shapes, windows)
     layout = tuple(tuple(s) for s in shapes)
     return FusedPlaneSampling.apply(layout, tuple(windows), points, *planes)
