@@ -32,10 +32,11 @@ needs only first derivatives of the TSDF w.r.t. points (``torch.autograd.grad`` 
 
 CUDA: the same op runs on CUDA tensors (embedding_bag and index_add_ have CUDA
 kernels; the constants are Python numbers, so the op copies nothing between host and
-device and never syncs). A Triton kernel (one launch for all levels, registered with
-``torch.library``) is not written yet: it was developed without a GPU, and the Triton
-interpreter (``TRITON_INTERPRET=1``) was not installed and tried in that session, so it
-could not have been tested.
+device and never syncs). The same maths as Triton kernels (one launch per level,
+``torch.library`` custom ops) is ``plane_sampling: triton``
+(:mod:`eslam.field.triton_sampling`), the explicit CUDA choice: tested against the
+reference in Triton's CPU interpreter, not yet run on a GPU; ``fused`` never switches to
+it by itself.
 """
 
 from __future__ import annotations

@@ -62,8 +62,10 @@ except ImportError:  # the op is then undefined and using it raises (unavailable
     triton = None
 
 BLOCK_POINTS = 32
-"""Points per program on a GPU: (32, C) corner tiles (not tuned: no GPU was at hand;
-larger blocks make ptxas spill registers in the backward, benchmarks/triton_ptxas.py)."""
+"""Points per program on a GPU: (32, C) corner tiles. Not tuned (no GPU was at hand);
+chosen by ptxas's register report for sm_90 and C = 32 (benchmarks/triton_ptxas.py,
+docs/benchmarks.md): at 32 points the forward does not spill in float32 and the
+backward spills 44-112 bytes; 64 points spill 0.2-2.8 kB."""
 
 BLOCK_POINTS_INTERPRETED = 128
 """Points per program in Triton's interpreter, which runs programs one after another
