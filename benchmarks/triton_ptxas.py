@@ -9,6 +9,7 @@ GPU, no CUDA driver. It says whether a block size spills, not how fast it runs.
 
 Usage:
     python benchmarks/triton_ptxas.py [--arch 90] [--blocks 32 64 128] [--channels 32]
+        [--warps 4]
 """
 
 from __future__ import annotations
@@ -76,12 +77,16 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--arch", type=int, default=90, help="compute capability, e.g. 90")
     parser.add_argument("--blocks", type=int, nargs="+", default=[32, 64, 128])
     parser.add_argument("--channels", type=int, default=32, help="features per plane row")
+    parser.add_argument("--warps", type=int, default=4, help="warps per program (Triton: 4)")
     args = parser.parse_args(argv)
     if triton_kernels.INTERPRETED:
         parser.error("unset TRITON_INTERPRET: the interpreter's kernels cannot be compiled")
     target = GPUTarget("cuda", args.arch, 32)
     channels = triton.next_power_of_2(args.channels)
-    print(f"| kernel | dtype | points per program | sm_{args.arch}, C = {args.channels} |")
+    print(
+        f"| kernel | dtype | points per program "
+        f"| sm_{args.arch}, C = {args.channels}, {args.warps} warps |"
+    )
     print("|---|---|---:|---|")
     for name, kernel, flags in (
         ("forward", triton_kernels.sample_level_kernel, {}),
@@ -98,7 +103,7 @@ def main(argv: list[str] | None = None) -> None:
                 )
                 constants.update({name: 1 for name in UNIT_STRIDES if name in kernel.arg_names})
                 source = ASTSource(kernel, signature(kernel, dtype), constexprs=constants)
-                compiled = triton.compile(source, target=target)
+                compiled = triton.compile(source, target=target, options={"num_warps": args.warps})
                 report = ptxas_report(compiled.asm["ptx"], args.arch)
                 print(f"| {name} | {dtype} | {block} | {report} |")
 

@@ -1,9 +1,10 @@
 """The Triton kernels of ``plane_sampling: triton`` (maths: :mod:`eslam.field.triton_sampling`).
 
-Imported only by :func:`eslam.field.triton_sampling.kernels`, on the first launch:
-``@triton.jit`` reads ``TRITON_INTERPRET`` when it decorates, so the kernels run in
-Triton's CPU interpreter exactly when that variable is 1 at that moment (the tests set it
-before their first launch on a machine without CUDA).
+Imported by :func:`eslam.field.triton_sampling.kernels` at the first use. ``@triton.jit``
+reads ``TRITON_INTERPRET`` when it decorates, so these kernels run in Triton's CPU
+interpreter when it is 1; it must be set before triton itself is imported (triton's own
+library kernels, used by ``tl.sum``, are decorated then), which tests/conftest.py does
+on a machine without CUDA.
 
 One program handles ``BLOCK_POINTS`` points of ONE level (one launch per level): it
 reads their 3 planes x 4 bilinear corners as (points, channels) tiles through the plane

@@ -37,8 +37,10 @@ derivatives: the SDF tracker and mapping need first ones only).
 Availability: the ops are defined only where ``import triton`` works and torch has
 ``torch.library.custom_op`` (torch >= 2.4; the package accepts torch >= 2.3); otherwise
 :func:`sample_levels_triton` raises one RuntimeError naming the fix. The kernels run on
-CUDA tensors, or on CPU tensors in Triton's interpreter when ``TRITON_INTERPRET=1`` was
-set before the first launch (slow: for tests). tests/field/test_triton_sampling.py holds
+CUDA tensors, or on CPU tensors in Triton's interpreter when ``TRITON_INTERPRET=1`` is
+in the process's environment before triton is imported (triton decorates its own
+library kernels, tl.sum's among them, at import; setting it later fails inside the
+interpreter). The interpreter is slow: for tests. tests/field/test_triton_sampling.py holds
 values and both gradients to the reference in the interpreter (float64 and float32) and,
 on a machine with CUDA, the compiled kernels; this module was written on a CPU-only
 machine and its compiled kernels have not run on a GPU here.
@@ -62,10 +64,14 @@ except ImportError:  # the op is then undefined and using it raises (unavailable
     triton = None
 
 BLOCK_POINTS = 32
-"""Points per program on a GPU: (32, C) corner tiles. Not tuned (no GPU was at hand);
-chosen by ptxas's register report for sm_90 and C = 32 (benchmarks/triton_ptxas.py,
-docs/benchmarks.md): at 32 points the forward does not spill in float32 and the
-backward spills 44-112 bytes; 64 points spill 0.2-2.8 kB."""
+"""Points per program on a GPU: (32, C) corner tiles, with :data:`NUM_WARPS`. Not timed
+(no GPU was at hand): chosen by ptxas's register report for sm_90 and C = 32
+(benchmarks/triton_ptxas.py, docs/benchmarks.md), the largest block that spills in
+neither kernel nor dtype at 8 warps."""
+
+NUM_WARPS = 8
+"""Warps per program: at Triton's default 4 every kernel variant used 198-255
+registers per thread and spilled from 32 points on (the backward) in the same report."""
 
 BLOCK_POINTS_INTERPRETED = 128
 """Points per program in Triton's interpreter, which runs programs one after another
@@ -85,8 +91,8 @@ def unavailable_reason() -> str | None:
 
 
 def kernels() -> ModuleType:
-    """The kernels module, imported at the first call: ``@triton.jit`` reads
-    ``TRITON_INTERPRET`` then (1: the kernels run in Triton's CPU interpreter)."""
+    """The kernels module (imported at the first use; ``INTERPRETED`` says whether its
+    kernels run in Triton's CPU interpreter)."""
     return importlib.import_module("eslam.field.triton_kernels")
 
 
@@ -118,18 +124,22 @@ def _launch_context(points: torch.Tensor, module: ModuleType):
     if not module.INTERPRETED:
         raise RuntimeError(
             f"the Triton plane-sampling kernels run on CUDA tensors, got {points.device} "
-            "ones (use plane_sampling: fused, or set TRITON_INTERPRET=1 before the first "
-            "launch for Triton's CPU interpreter)"
+            "ones (use plane_sampling: fused, or start the process with TRITON_INTERPRET=1 "
+            "for Triton's CPU interpreter)"
         )
     return contextlib.nullcontext()
 
 
 def _launch(module: ModuleType, points: torch.Tensor, planes: torch.Tensor):
-    """Launch grid and constant block sizes of one level's kernel."""
+    """Launch grid, block sizes and warps of one level's kernel."""
     block = BLOCK_POINTS_INTERPRETED if module.INTERPRETED else BLOCK_POINTS
     grid = (triton.cdiv(points.shape[0], block),)
-    blocks = dict(BLOCK_POINTS=block, BLOCK_CHANNELS=triton.next_power_of_2(planes.shape[1]))
-    return grid, blocks
+    options = dict(
+        BLOCK_POINTS=block,
+        BLOCK_CHANNELS=triton.next_power_of_2(planes.shape[1]),
+        num_warps=NUM_WARPS,  # a launch option (the interpreter ignores it)
+    )
+    return grid, options
 
 
 def _forward(
