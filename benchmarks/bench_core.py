@@ -3,7 +3,8 @@ where the time goes, and the per-frame work outside the iterations.
 
 1. One tracking iteration (2000 rays) and one mapping iteration (4000 rays over a window
    of 10 keyframes), forward + backward + Adam step, for each plane sampling
-   (``FieldConfig.plane_sampling`` reference, fast, fused), plus the field query alone
+   (``FieldConfig.plane_sampling`` reference, fast, fused; triton on CUDA when asked
+   for with ``--samplings``), plus the field query alone
    (2000 x 40 points, forward + backward). The samplings are timed interleaved (one
    iteration of each in turn), so their ratios hold on a loaded machine. Every figure
    is the median and the 90th percentile of ``--repeats`` timed iterations after
@@ -32,7 +33,7 @@ docs/benchmarks.md (or ``--docs PATH``) with the date, the machine and the comma
 
 Usage:
     python benchmarks/bench_core.py [--device cpu|cuda] [--repeats N] [--warmup N]
-        [--threads N] [--samplings reference fast fused] [--breakdown-sampling S]
+        [--threads N] [--samplings reference fast fused triton] [--breakdown-sampling S]
         [--benchmarks field tracking mapping] [--profile-repeats N] [--no-frame-work]
         [--no-append] [--docs PATH] [--note TEXT]
 """
@@ -60,6 +61,7 @@ from _machine import (
 
 from eslam.config import ESLAMConfig
 from eslam.field.scene_field import SceneField
+from eslam.field.triton_sampling import check_device as check_sampling_device
 from eslam.geometry.pose import quaternion_to_matrix
 from eslam.render.rays import camera_directions
 from eslam.slam.keyframes import KeyframeStore, make_window_strategy
@@ -141,7 +143,12 @@ def synthetic_views(
 
 
 def build_field(config: ESLAMConfig, sampling: str, device: torch.device) -> SceneField:
-    """The paper's field over room0's bound, same initial planes for either sampling."""
+    """The paper's field over room0's bound, same initial planes for either sampling.
+
+    Raises:
+        ConfigError: ``triton`` on a device it cannot run on (the message says why).
+    """
+    check_sampling_device(sampling, device)
     torch.manual_seed(SEED)
     field_config = dataclasses.replace(config.field, plane_sampling=sampling)
     return SceneField(field_config, torch.tensor(ROOM0_BOUND)).to(device)
@@ -198,6 +205,10 @@ def mapping_iteration(
 
 BENCHMARKS = ("field", "tracking", "mapping")
 SAMPLINGS = ("reference", "fast", "fused")
+"""The samplings timed by default (they run on any device)."""
+
+SAMPLING_CHOICES = (*SAMPLINGS, "triton")
+"""Every sampling ``--samplings`` takes: triton only on CUDA (or in Triton's interpreter)."""
 
 
 def time_interleaved(
@@ -533,13 +544,13 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument(
         "--samplings",
         nargs="+",
-        choices=SAMPLINGS,
+        choices=SAMPLING_CHOICES,
         default=list(SAMPLINGS),
-        help="plane samplings to time, interleaved (default: all)",
+        help="plane samplings to time, interleaved (default: reference fast fused)",
     )
     parser.add_argument(
         "--breakdown-sampling",
-        choices=SAMPLINGS,
+        choices=SAMPLING_CHOICES,
         default=ESLAMConfig().field.plane_sampling,
         help="plane sampling of the per-stage breakdown (default: the config default)",
     )

@@ -18,6 +18,13 @@ from eslam.testing.tiny import TINY_SETTINGS
 
 torch.set_num_threads(int(os.environ.get("ESLAM_TEST_THREADS", "2")))
 
+# Without CUDA, plane_sampling: triton's tests run its kernels on CPU tensors in Triton's
+# interpreter. Triton reads TRITON_INTERPRET as it decorates kernels, its own library
+# ones (tl.sum's) at `import triton`, so it is set before anything imports triton (torch
+# does not); it changes nothing else here (no other code uses triton on a CPU).
+if not torch.cuda.is_available():
+    os.environ.setdefault("TRITON_INTERPRET", "1")
+
 
 @pytest.fixture(scope="session")
 def real_data() -> Path:

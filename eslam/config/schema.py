@@ -176,11 +176,14 @@ class FieldConfig:
     """Optimise beta with the decoders (release keeps it fixed at 10 for TUM)."""
     bound_multiple: float = 0.24
     """The bound's upper corner grows so each side is a multiple of this (release), metres."""
-    plane_sampling: Literal["reference", "fast", "fused"] = "fused"
+    plane_sampling: Literal["reference", "fast", "fused", "triton"] = "fused"
     """Plane interpolation, all bilinear with border padding and the same results:
     reference = one grid_sample per plane (readable); fast = one batched grid_sample per
     level; fused = every level of the field in one op of row gathers from channels-last
-    planes with a hand-written backward (eslam/field/fused_sampling.py)."""
+    planes with a hand-written backward (eslam/field/fused_sampling.py); triton = the
+    fused maths in Triton kernels, for CUDA devices (eslam/field/triton_sampling.py; needs
+    the triton package; refused on other devices unless TRITON_INTERPRET=1 runs Triton's
+    slow CPU interpreter; not yet run on a GPU)."""
 
     def __post_init__(self) -> None:
         for name in ("geometry_resolution", "appearance_resolution"):

@@ -32,10 +32,11 @@ needs only first derivatives of the TSDF w.r.t. points (``torch.autograd.grad`` 
 
 CUDA: the same op runs on CUDA tensors (embedding_bag and index_add_ have CUDA
 kernels; the constants are Python numbers, so the op copies nothing between host and
-device and never syncs). A Triton kernel (one launch for all levels, registered with
-``torch.library``) is not written yet: it was developed without a GPU, and the Triton
-interpreter (``TRITON_INTERPRET=1``) was not installed and tried in that session, so it
-could not have been tested.
+device and never syncs). The same maths as Triton kernels (one launch per level,
+``torch.library`` custom ops) is ``plane_sampling: triton``
+(:mod:`eslam.field.triton_sampling`), the explicit CUDA choice: tested against the
+reference in Triton's CPU interpreter, not yet run on a GPU; ``fused`` never switches to
+it by itself.
 """
 
 from __future__ import annotations
@@ -259,6 +260,22 @@ class FusedPlaneSampling(torch.autograd.Function):
         return (None, None, points_grad, *plane_grads)
 
 
+def level_windows(planes: Sequence, shapes: Sequence, windows: Sequence | None) -> list:
+    """The per-level windows (all None when ``windows`` is None), once the level lists are
+    checked to have one entry per level.
+
+    Raises:
+        ValueError: no level, or lists of different lengths.
+    """
+    windows = [None] * len(planes) if windows is None else list(windows)
+    if not (len(planes) == len(shapes) == len(windows)) or not planes:
+        raise ValueError(
+            f"need one plane tensor, shape and window per level, got "
+            f"{len(planes)}, {len(shapes)} and {len(windows)}"
+        )
+    return windows
+
+
 def sample_levels_fused(
     points: torch.Tensor,
     planes: Sequence[torch.Tensor],
@@ -278,11 +295,6 @@ def sample_levels_fused(
         One (N, C) tensor per level, equal to
         :func:`~eslam.field.planes.sample_planes_reference` of the level's coordinates.
     """
-    windows = [None] * len(planes) if windows is None else list(windows)
-    if not (len(planes) == len(shapes) == len(windows)) or not planes:
-        raise ValueError(
-            f"need one plane tensor, shape and window per level, got "
-            f"{len(planes)}, {len(shapes)} and {len(windows)}"
-        )
+    windows = level_windows(planes, shapes, windows)
     layout = tuple(tuple(s) for s in shapes)
     return FusedPlaneSampling.apply(layout, tuple(windows), points, *planes)

@@ -10,15 +10,18 @@ three planes, laid out as in the release:
 
 A level's three planes live in ONE parameter tensor of shape (3, C, Hmax, Wmax), each
 plane in the top-left corner ``[i, :, :h_i, :w_i]`` and zeros beyond (the padding gets
-no gradient). Three samplings read the same parameters (``FieldConfig.plane_sampling``):
+no gradient). Four samplings read the same parameters (``FieldConfig.plane_sampling``):
 
 * reference: each plane sliced out and sampled alone by ``grid_sample`` (readable);
 * fast: a level's three planes in one batched ``grid_sample`` call;
 * fused: every level of the field (geometry and appearance, coarse and fine) in one op
   of row gathers from channels-last planes with a hand-written backward
-  (:mod:`eslam.field.fused_sampling`); the planes are then stored channels-last.
+  (:mod:`eslam.field.fused_sampling`); the planes are then stored channels-last;
+* triton: the fused sampling's maths in Triton kernels, one launch per level, for CUDA
+  (:mod:`eslam.field.triton_sampling`; channels-last planes too).
 
-tests/field/test_planes.py and tests/field/test_fused_sampling.py hold them equal.
+tests/field/test_planes.py, test_fused_sampling.py and test_triton_sampling.py hold them
+equal.
 """
 
 from __future__ import annotations
@@ -33,9 +36,14 @@ import torch.nn.functional as F
 from torch import nn
 
 from eslam.field.fused_sampling import sample_levels_fused
+from eslam.field.triton_sampling import sample_levels_triton
 
-PlaneSampling = Literal["reference", "fast", "fused"]
+PlaneSampling = Literal["reference", "fast", "fused", "triton"]
 """How plane features are interpolated (``FieldConfig.plane_sampling``; module doc)."""
+
+ROW_SAMPLINGS = ("fused", "triton")
+"""The samplings that read rows of C features from channels-last planes, all levels of a
+field in one op (:func:`fused_features`)."""
 
 PLANE_AXES: tuple[tuple[int, int], ...] = ((0, 1), (0, 2), (1, 2))
 """Point coordinates (W axis, H axis) each plane of a level is sampled at: xy, xz, yz."""
@@ -374,8 +382,8 @@ class PlaneLevel(nn.Module):
         planes: (3, C, Hmax, Wmax) parameter; plane i is ``planes[i, :, :h_i, :w_i]``,
             initialised normal(0, init_std) (release), zero padding beyond.
         shapes: the true (h, w) of the xy, xz, yz planes.
-        sampling: "reference", "fast" or "fused" (module doc); "fused" stores the planes
-            channels-last (same shape and values, other strides).
+        sampling: "reference", "fast", "fused" or "triton" (module doc); "fused" and
+            "triton" store the planes channels-last (same shape and values, other strides).
         window: (3, 2) buffer (in the state_dict): the box the first and last vertices
             span, in the scene's normalised coordinates; [-1, 1] on every axis until the
             scene bound grows (:meth:`grow`), then wider, so old vertices stay in place.
@@ -396,8 +404,10 @@ class PlaneLevel(nn.Module):
         None: torch's global one).
         """
         super().__init__()
-        if sampling not in ("reference", "fast", "fused"):
-            raise ValueError(f"plane sampling must be reference, fast or fused, got {sampling!r}")
+        if sampling not in ("reference", "fast", "fused", "triton"):
+            raise ValueError(
+                f"plane sampling must be reference, fast, fused or triton, got {sampling!r}"
+            )
         self.sampling = sampling
         self.init_std = float(init_std)
         grid = tuple(int(n) for n in grid)
@@ -415,7 +425,7 @@ class PlaneLevel(nn.Module):
         self.shapes = plane_shapes(grid)
         height, width = planes.shape[2], planes.shape[3]
         device = planes.device
-        if self.sampling == "fused":  # rows of C features contiguous: gathers read them whole
+        if self.sampling in ROW_SAMPLINGS:  # rows of C features contiguous: read them whole
             planes = planes.contiguous(memory_format=torch.channels_last)
         self.planes = nn.Parameter(planes)
         self.vertices = torch.tensor(grid, dtype=torch.int64, device=self.vertices.device)
@@ -476,10 +486,8 @@ class PlaneLevel(nn.Module):
 
     def sample(self, points_n: torch.Tensor) -> torch.Tensor:
         """(N, 3) normalised points -> (N, C) sum of the three planes' bilinear features."""
-        if self.sampling == "fused":
-            return sample_levels_fused(
-                points_n, [self.planes], [self.shapes], [self._window_bounds]
-            )[0]
+        if self.sampling in ROW_SAMPLINGS:
+            return sample_levels_at_once([self], points_n)[0]
         points_n = self.coordinates(points_n)
         if self.sampling == "fast":
             return sample_planes_fast(self.planes, self.shapes, points_n, self.padding, self.scale)
@@ -558,19 +566,29 @@ class PlaneSet(nn.Module):
             level.grow(level_growth(level.grid, level.window, old_bound, new_bound), generator)
 
 
+def sample_levels_at_once(
+    levels: Sequence[PlaneLevel], points_n: torch.Tensor
+) -> tuple[torch.Tensor, ...]:
+    """Each level's (N, C) features from ONE op over all of them: the ``fused`` op
+    (:func:`~eslam.field.fused_sampling.sample_levels_fused`) or the ``triton`` one
+    (:func:`~eslam.field.triton_sampling.sample_levels_triton`), as the levels' sampling
+    says (one sampling per field)."""
+    planes = [level.planes for level in levels]
+    shapes = [level.shapes for level in levels]
+    if levels[0].sampling == "triton":  # the window buffers, read on the device
+        windows = [None if level._identity else level.window for level in levels]
+        return sample_levels_triton(points_n, planes, shapes, windows)
+    return sample_levels_fused(points_n, planes, shapes, [level._window_bounds for level in levels])
+
+
 def fused_features(sets: Sequence[PlaneSet], points_n: torch.Tensor) -> list[torch.Tensor]:
     """Each plane set's (N, out_dim) features, every level of every set sampled in ONE
-    :func:`~eslam.field.fused_sampling.sample_levels_fused` op (the ``fused`` sampling).
+    op (:func:`sample_levels_at_once`: the ``fused`` or ``triton`` sampling).
 
     Equal to ``[s.features(points_n) for s in sets]``.
     """
     levels = [level for planes in sets for level in planes.levels.values()]
-    per_level = sample_levels_fused(
-        points_n,
-        [level.planes for level in levels],
-        [level.shapes for level in levels],
-        [level._window_bounds for level in levels],
-    )
+    per_level = sample_levels_at_once(levels, points_n)
     features, start = [], 0
     for planes in sets:
         count = len(planes.levels)

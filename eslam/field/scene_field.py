@@ -15,6 +15,7 @@ from torch import nn
 from eslam.config import FieldConfig
 from eslam.field.decoders import appearance_decoder, geometry_decoder
 from eslam.field.planes import (
+    ROW_SAMPLINGS,
     PlaneLevel,
     PlaneSet,
     enclosing_bound,
@@ -164,10 +165,11 @@ class SceneField(nn.Module):
         """Geometry features (N, G) and colour features (N, A) (None unless ``with_colour``)
         at (N, 3) normalised points; the colour ones are the geometry's with shared planes.
 
-        With ``plane_sampling: fused`` every level of both plane sets is sampled in one op.
+        With ``plane_sampling: fused`` (or ``triton``) every level of both plane sets is
+        sampled in one op.
         """
         colour_set = self.appearance if with_colour else None
-        if self.config.plane_sampling == "fused":
+        if self.config.plane_sampling in ROW_SAMPLINGS:
             sets = [self.geometry] if colour_set is None else [self.geometry, colour_set]
             features = fused_features(sets, points_n)
             geometry = features[0]

@@ -41,6 +41,7 @@ from eslam.data.selection import sequence_timestamps
 from eslam.data.source import FrameSource, SequenceSource, source_length
 from eslam.errors import ConfigError, ESLAMError, InputError, RunInterrupted
 from eslam.field.scene_field import SceneField
+from eslam.field.triton_sampling import check_device
 from eslam.render.rays import camera_directions
 from eslam.slam.bounds_policy import (
     bound_from_frame,
@@ -518,6 +519,7 @@ def run_slam(
         RunInterrupted: Ctrl-C (or the CLI's SIGTERM) once the run folder was opened.
     """
     device = resolve_device(config.device)
+    check_device(config.field.plane_sampling, device)
     config = absolute_data_path(config)
     config = dataclasses.replace(config, data=with_detected_format(config.data))
     if resume:
