@@ -310,8 +310,8 @@ class SdfTrackerConfig:
     colour_weight: float = 0.0
     """Weight lambda of the photometric term, metres per unit colour: each point also
     has the residuals lambda (c(T q) - C), decoded minus observed colour in [0, 1], so
-    0.05 makes a colour error of 0.1 weigh like a 5 mm SDF error; 0 turns it off
-    (docs/tracking.md)."""
+    0.05 makes a colour error of 0.1 weigh like a 5 mm SDF error; 0 turns it off (the
+    default: it made whole demo runs worse; docs/tracking.md)."""
     colour_robust_scale: float = 0.1
     """Scale of the robust loss on the colour residual, in colour units [0, 1]."""
 

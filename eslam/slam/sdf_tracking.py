@@ -41,7 +41,8 @@ counts rho(lambda) per channel in the cost) and its Jacobian rows are
 
 stacked into the same normal equations: H = J^T W J + sum_k J^cT_k W^c_k J^c_k, and
 likewise the gradient. Cost: the field is queried with colour, and autograd runs four
-backward passes (SDF and three channels) instead of one.
+backward passes (SDF and three channels) instead of one (3-5x the time per frame on the
+demo; docs/results.md).
 
 Each frame gets a quality figure: the inlier fraction (points inside the band with
 |r| at most the robust scale c) and the robust RMS residual of the inliers. A frame with
