@@ -8,9 +8,12 @@ point pyramid it reports the median and maximum wall time per frame, the mean
 translation error against the ground truth, the mean iterations, and the smallest
 eigenvalue of the normalised information at the ground-truth poses (minimum and median
 over the frames; :func:`eslam.slam.sdf_tracking.normalised_information`: near 0 means a
-degenerate view, e.g. one plane).
+degenerate view, e.g. one plane). With ``--colour-weights`` each pyramid is measured
+once per weight of the colour term (``tracking.sdf.colour_weight``), and the table also
+gives the mean rotation error.
 
     python benchmarks/sdf_tracking.py runs/room0 --levels 1000,4000 500,2000 2000
+    python benchmarks/sdf_tracking.py runs/demo --frames 20 --colour-weights 0 0.1 0.2
 
 Prints a markdown table and, unless ``--no-append``, appends it to docs/benchmarks.md.
 """
@@ -20,6 +23,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import datetime
+import math
 import statistics
 import sys
 import time
@@ -45,9 +49,11 @@ from eslam.slam.views import make_view
 @dataclasses.dataclass(frozen=True)
 class Row:
     levels: tuple[int, ...]
+    colour_weight: float
     median_s: float
     max_s: float
     error_mm: float
+    error_deg: float
     iterations: float
     information_min: float
     information_median: float
@@ -63,9 +69,10 @@ def measure(args: argparse.Namespace) -> list[Row]:
     count = min(args.frames, len(sequence) - 1)
     frames = [sequence[i] for i in range(count + 1)]
     rows = []
-    for levels in args.levels:
-        tracker = SdfTracker(dataclasses.replace(config.tracking.sdf, levels=levels))
-        seconds, errors, iterations, smallest = [], [], [], []
+    for levels, weight in itertools.product(args.levels, args.colour_weights):
+        settings = dataclasses.replace(config.tracking.sdf, levels=levels, colour_weight=weight)
+        tracker = SdfTracker(settings)
+        seconds, errors, turns, iterations, smallest = [], [], [], [], []
         for previous, frame in itertools.pairwise(frames):
             if previous.pose_gt is None or frame.pose_gt is None:
                 raise SystemExit(f"{args.run}: the sequence needs ground-truth poses")
@@ -76,23 +83,27 @@ def measure(args: argparse.Namespace) -> list[Row]:
                 config.tracking.border,
             )
             truth = torch.from_numpy(frame.pose_gt).float()
-            points, _ = sdf_points(view, max(levels), torch.Generator().manual_seed(0))
-            at_truth = linearise(field, points, truth, tracker.config)
+            points, pixels = sdf_points(view, max(levels), torch.Generator().manual_seed(0))
+            colours = view.rgb[pixels] if weight > 0 else None
+            at_truth = linearise(field, points, truth, tracker.config, colours)
             smallest.append(float(normalised_information(at_truth)[0][0]))
             start = torch.from_numpy(previous.pose_gt).float()
             begin = time.perf_counter()
             result = tracker.track(field, view, start, torch.Generator().manual_seed(frame.index))
             seconds.append(time.perf_counter() - begin)
-            translation, _ = pose_distance(result.pose, truth)
+            translation, rotation = pose_distance(result.pose, truth)
             errors.append(1000.0 * float(translation))
+            turns.append(math.degrees(float(rotation)))
             assert result.quality is not None
             iterations.append(result.quality.iterations)
         rows.append(
             Row(
                 levels,
+                weight,
                 statistics.median(seconds),
                 max(seconds),
                 statistics.mean(errors),
+                statistics.mean(turns),
                 statistics.mean(iterations),
                 min(smallest),
                 statistics.median(smallest),
@@ -104,14 +115,16 @@ def measure(args: argparse.Namespace) -> list[Row]:
 
 def table(rows: list[Row]) -> str:
     lines = [
-        "| levels (points) | median (s/frame) | max (s/frame) | mean error (mm) | iterations "
+        "| levels (points) | colour weight | median (s/frame) | max (s/frame) "
+        "| mean error (mm) | mean error (deg) | iterations "
         "| smallest information (min / median) |",
-        "|---|---:|---:|---:|---:|---:|",
+        "|---|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for row in rows:
         lines.append(
-            f"| {', '.join(map(str, row.levels))} | {row.median_s:.3f} | {row.max_s:.3f} "
-            f"| {row.error_mm:.2f} | {row.iterations:.1f} "
+            f"| {', '.join(map(str, row.levels))} | {row.colour_weight:g} "
+            f"| {row.median_s:.3f} | {row.max_s:.3f} "
+            f"| {row.error_mm:.2f} | {row.error_deg:.3f} | {row.iterations:.1f} "
             f"| {row.information_min:.3f} / {row.information_median:.3f} |"
         )
     return "\n".join(lines) + "\n"
@@ -122,6 +135,13 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("run", type=Path, help="a finished run folder (map.pt, config.yaml)")
     parser.add_argument(
         "--levels", nargs="+", default=["1000,4000"], help="point pyramids, e.g. 500,2000"
+    )
+    parser.add_argument(
+        "--colour-weights",
+        nargs="+",
+        type=float,
+        default=[0.0],
+        help="tracking.sdf.colour_weight values, each measured (metres per unit colour)",
     )
     parser.add_argument("--frames", type=int, default=19, help="frames tracked (1..N)")
     parser.add_argument("--threads", type=int, default=2)

@@ -310,8 +310,17 @@ class SdfTrackerConfig:
     degeneracy: float = 0.0
     """Pose directions whose per-point information falls below this are held at the
     guess (Zhang et al. 2016; sliding along a plane); 0 turns the test off."""
+    colour_weight: float = 0.0
+    """Weight lambda of the photometric term, metres per unit colour: each point also
+    has the residuals lambda (c(T q) - C), decoded minus observed colour in [0, 1], so
+    0.05 makes a colour error of 0.1 weigh like a 5 mm SDF error; 0 turns it off (the
+    default: it made whole demo runs worse; docs/tracking.md)."""
+    colour_robust_scale: float = 0.1
+    """Scale of the robust loss on the colour residual, in colour units [0, 1]."""
 
     def __post_init__(self) -> None:
+        if self.colour_weight < 0 or self.colour_robust_scale <= 0:
+            raise ValueError("colour_weight must be >= 0 and colour_robust_scale > 0")
         if not self.levels or min(self.levels) < 6 or list(self.levels) != sorted(self.levels):
             raise ValueError(f"levels must be increasing point counts >= 6, got {self.levels}")
         _at_least(self, "iterations", 1)

@@ -21,6 +21,29 @@ accepting it when the robust cost drops (lambda shrinks) and rejecting it otherw
 (lambda grows). The points are a fixed, seeded subset of the frame's valid pixels,
 used coarse to fine (the first ``levels[0]`` points, then more).
 
+**Colour term** (``colour_weight`` lambda > 0; off by default). Dense photometric
+alignment (Steinbruecker, Sturm and Cremers 2011; Kerl, Sturm and Cremers 2013), here
+against the map's decoded colour at the point as in Bylow et al.'s colour extension of
+point-to-TSDF tracking: each point also has the three residuals
+
+    r^c_ik(T) = lambda * (c_k(T q_i) - C_ik),   k = R, G, B
+
+with C_i the frame's colour at the point's pixel and c the field's decoded colour, both
+in [0, 1]. lambda is in metres per unit colour, so the colour residual is compared with
+the SDF residual in metres: lambda = 0.05 makes a colour error of 0.1 weigh like a 5 mm
+SDF error (choose it near sigma_sdf / sigma_colour, the ratio of the two noise levels).
+Its robust loss is the SDF term's kind with scale lambda * ``colour_robust_scale`` (so
+the weights are those of the unscaled residual with scale ``colour_robust_scale``), it
+shares the SDF term's validity (weight 0 outside the band or the bound; an invalid point
+counts rho(lambda) per channel in the cost) and its Jacobian rows are
+
+    J^c_ik = lambda * [h_ik^T, (p_i x h_ik)^T],   h_ik = grad_p c_k(p_i),
+
+stacked into the same normal equations: H = J^T W J + sum_k J^cT_k W^c_k J^c_k, and
+likewise the gradient. Cost: the field is queried with colour, and autograd runs four
+backward passes (SDF and three channels) instead of one (3-5x the time per frame on the
+demo; docs/results.md).
+
 Each frame gets a quality figure: the inlier fraction (points inside the band with
 |r| at most the robust scale c) and the robust RMS residual of the inliers. A frame with
 too few inliers or too large a residual is reported as failed (the loop keeps the
@@ -82,9 +105,10 @@ class Linearisation:
         residual: (N,) r_i, metres.
         weight: (N,) robust weight times validity (0 for saturated or outside points).
         cost: 0-d sum_i rho(r_i), an invalid point counting as rho(T) (as far as it can
-            be): so a step that brings points into the band lowers the cost.
-        hessian: (6, 6) J^T W J (float64).
-        gradient: (6,) J^T W r (float64).
+            be): so a step that brings points into the band lowers the cost; plus the
+            colour term's robust cost when it is on.
+        hessian: (6, 6) J^T W J (float64), both terms.
+        gradient: (6,) J^T W r (float64), both terms.
         valid: (N,) bool, points inside the bound and the band.
         centre: (3,) float64 weighted centroid of the points (for :func:`constrained_directions`).
     """
@@ -98,38 +122,94 @@ class Linearisation:
     centre: torch.Tensor
 
 
+def twist_jacobian(points: torch.Tensor, gradient: torch.Tensor) -> torch.Tensor:
+    """(N, 6) rows [g^T, (p x g)^T]: the derivative of a scalar field f at the points p
+    with respect to a left twist xi = (v, omega), since p moves by v + omega x p and
+    d f = g . (v + omega x p) = g . v + (p x g) . omega, with g = grad_p f (N, 3)."""
+    return torch.cat((gradient, torch.cross(points, gradient, dim=-1)), dim=-1)
+
+
+def field_derivatives(
+    field: SceneFieldLike, points: torch.Tensor, with_rgb: bool
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor | None, torch.Tensor | None]:
+    """TSDF s (N,), its spatial gradient (N, 3), and with ``with_rgb`` the decoded colour
+    (N, 3) and its spatial Jacobian (N, 3, 3), [i, k] = grad_p c_k(p_i), by autograd.
+
+    One field query; one backward pass for s and one per colour channel (a point's
+    outputs depend only on that point, so the gradient of a channel's sum is the
+    per-point gradient). The field's parameters must not require gradients.
+    """
+    with torch.enable_grad():
+        points = points.detach().requires_grad_(True)
+        output = field.query(points, with_rgb=with_rgb)
+        outputs = [output.sdf]
+        if with_rgb:
+            if output.rgb is None:
+                raise ValueError("the field decodes no colour: set tracking.sdf.colour_weight: 0")
+            outputs += list(output.rgb.unbind(dim=-1))
+        gradients = [
+            torch.autograd.grad(value.sum(), points, retain_graph=index < len(outputs) - 1)[0]
+            for index, value in enumerate(outputs)
+        ]
+    if not with_rgb:
+        return output.sdf.detach(), gradients[0], None, None
+    assert output.rgb is not None
+    return output.sdf.detach(), gradients[0], output.rgb.detach(), torch.stack(gradients[1:], 1)
+
+
 def linearise(
     field: SceneFieldLike,
     points_cam: torch.Tensor,
     pose: torch.Tensor,
     config: SdfTrackerConfig,
+    colours: torch.Tensor | None = None,
 ) -> Linearisation:
-    """Residuals r_i = T s(T q_i), their robust weights and J^T W J, J^T W r (module doc).
+    """Residuals r_i = T s(T q_i), their robust weights and J^T W J, J^T W r (module doc);
+    with ``config.colour_weight`` > 0 also the colour term against ``colours`` (N, 3),
+    the frame's observed colour at the points' pixels in [0, 1].
 
     The field's parameters must not require gradients (only the points do).
     """
     truncation = field.truncation
-    with torch.enable_grad():
-        points = (points_cam @ pose[:3, :3].T + pose[:3, 3]).detach().requires_grad_(True)
-        sdf = field.query(points, with_rgb=False).sdf
-        (gradient,) = torch.autograd.grad(sdf.sum(), points)
-    sdf = sdf.detach()
-    points = points.detach()
+    with_colour = config.colour_weight > 0
+    if with_colour and colours is None:
+        raise ValueError("colour_weight > 0 needs the points' observed colours")
+    points = (points_cam @ pose[:3, :3].T + pose[:3, 3]).detach()
+    sdf, gradient, rgb, rgb_gradient = field_derivatives(field, points, with_colour)
     residual = truncation * sdf
     valid = (sdf.abs() < config.max_sdf) & inside_bound(points, field.bound)
     weight = robust_weights(residual, config.robust_scale, config.robust) * valid
     far = torch.full_like(residual, truncation)
     cost = robust_cost(torch.where(valid, residual, far), config.robust_scale, config.robust)
-    jacobian = truncation * torch.cat((gradient, torch.cross(points, gradient, dim=-1)), dim=-1)
-    jacobian = jacobian.double()
+    jacobian = (truncation * twist_jacobian(points, gradient)).double()
     weighted = jacobian * weight.double()[:, None]
+    hessian = weighted.T @ jacobian
+    gradient_xi = weighted.T @ residual.double()
+    cost = cost.sum()
+    if with_colour:
+        assert colours is not None and rgb is not None and rgb_gradient is not None
+        scale = config.colour_weight
+        colour_scale = scale * config.colour_robust_scale
+        colour_residual = scale * (rgb - colours)  # (N, 3)
+        colour_weight = robust_weights(colour_residual, colour_scale, config.robust)
+        colour_weight = colour_weight * valid[:, None]
+        worst = torch.full_like(colour_residual, scale)
+        colour_cost = robust_cost(
+            torch.where(valid[:, None], colour_residual, worst), colour_scale, config.robust
+        )
+        cost = cost + colour_cost.sum()
+        for channel in range(3):
+            rows = (scale * twist_jacobian(points, rgb_gradient[:, channel])).double()
+            rows_weighted = rows * colour_weight[:, channel].double()[:, None]
+            hessian = hessian + rows_weighted.T @ rows
+            gradient_xi = gradient_xi + rows_weighted.T @ colour_residual[:, channel].double()
     total = weight.double().sum().clamp_min(1e-12)
     return Linearisation(
         residual=residual,
         weight=weight,
-        cost=cost.sum(),
-        hessian=weighted.T @ jacobian,
-        gradient=weighted.T @ residual.double(),
+        cost=cost,
+        hessian=hessian,
+        gradient=gradient_xi,
         valid=valid,
         centre=(weight.double()[:, None] * points.double()).sum(dim=0) / total,
     )
@@ -259,13 +339,15 @@ def track_sdf(
     generator: torch.Generator,
 ) -> TrackingResult:
     """Pose of ``view`` by Levenberg-Marquardt on SDF residuals (module doc)."""
-    points_cam, _ = sdf_points(view, max(config.levels), generator)
+    points_cam, pixels = sdf_points(view, max(config.levels), generator)
+    colours = view.rgb[pixels] if config.colour_weight > 0 else None
     pose = initial_pose.detach().clone()
     iterations = 0
     system = None
     for count in config.levels:
         level_points = points_cam[:count]
-        system = linearise(field, level_points, pose, config)
+        level_colours = colours[:count] if colours is not None else None
+        system = linearise(field, level_points, pose, config, level_colours)
         damping = torch.tensor(config.damping, dtype=torch.float64, device=pose.device)
         for _ in range(config.iterations):
             if int(system.valid.sum()) < MIN_POINTS:
@@ -277,7 +359,7 @@ def track_sdf(
                 damping = damping * 4.0
                 continue
             candidate = se3_exp(step.to(pose.dtype)) @ pose
-            trial = linearise(field, level_points, candidate, config)
+            trial = linearise(field, level_points, candidate, config, level_colours)
             better = bool(trial.cost <= system.cost)
             if better:
                 pose, system = candidate, trial
