@@ -235,6 +235,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
 
 def main(argv: list[str] | None = None) -> None:
     args = parse_args(argv)
+    torch.set_num_threads(args.threads)  # run_slam leaves torch's threads alone (the CLI sets them)
     device = torch.device(args.device)
     command = command_line("benchmarks/real_data.py", argv)
     load_start = load_average()
