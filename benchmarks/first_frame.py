@@ -46,6 +46,7 @@ from eslam.render.rays import camera_directions
 from eslam.slam.mapping import MappingSchedule, MappingSettings, map_window
 from eslam.slam.state import new_field
 from eslam.slam.views import make_view
+from eslam.slam.warm_start import WarmStart
 from eslam.synthetic import SynthConfig, build_scene, generate_sequence, scene_bound
 from eslam.workflows.demo import DEMO_SCENE
 
@@ -66,14 +67,24 @@ class Schedule:
     lr_factor: float
     rays: int
     decay: float
+    warm_steps: int = 0
+    warm_points: int = 0
+    warm_band: float = 0.25
+    warm_factor: float = 20.0
 
     @classmethod
     def parse(cls, text: str) -> Schedule:
-        name, iterations, factor, rays, decay = text.split(":")
-        return cls(name, int(iterations), float(factor), int(rays), float(decay))
+        name, iterations, factor, rays, decay, *warm = text.split(":")
+        numbers = [int(warm[0]), int(warm[1]), *map(float, warm[2:])] if warm else []
+        return cls(name, int(iterations), float(factor), int(rays), float(decay), *numbers)
+
+    def warm_start(self) -> WarmStart | None:
+        if self.warm_steps == 0:
+            return None
+        return WarmStart(self.warm_steps, self.warm_points, self.warm_band, self.warm_factor)
 
 
-def run(args: argparse.Namespace) -> list[tuple[Schedule, float, HeldOutErrors]]:
+def run(args: argparse.Namespace) -> list[tuple[Schedule, float, float, HeldOutErrors]]:
     config = load_config(REPO / "eslam" / "configs" / args.config, args.overrides)
     scene = SynthConfig(
         frames=max(args.held_out) + 1, width=DEMO_SCENE.width, height=DEMO_SCENE.height, seed=0
@@ -96,11 +107,12 @@ def run(args: argparse.Namespace) -> list[tuple[Schedule, float, HeldOutErrors]]
             schedule.lr_factor,
             schedule.rays or config.mapping.rays,
             schedule.decay,
+            schedule.warm_start(),
         )
         generator = torch.Generator().manual_seed(config.seed)
-        start = time.perf_counter()
+        start, cpu_start = time.perf_counter(), time.process_time()
         map_window(field, [view], pose, [False], settings, plan, generator)
-        seconds = time.perf_counter() - start
+        seconds, cpu = time.perf_counter() - start, time.process_time() - cpu_start
         field.requires_grad_(False)
         errors = held_out_errors(
             field,
@@ -108,28 +120,39 @@ def run(args: argparse.Namespace) -> list[tuple[Schedule, float, HeldOutErrors]]
             observed_by=None if args.all_pixels else first,
             pixel_step=args.pixel_step,
         )
-        rows.append((schedule, seconds, errors))
+        rows.append((schedule, seconds, cpu, errors))
         print(
-            f"{schedule.name}: {seconds:.1f} s, depth L1 {100 * errors.depth_l1_m:.3f} cm, "
+            f"{schedule.name}: {seconds:.1f} s ({cpu:.1f} s CPU), "
+            f"depth L1 {100 * errors.depth_l1_m:.3f} cm, "
             f"surface SDF {100 * errors.surface_sdf_m:.3f} cm",
             flush=True,
         )
     return rows
 
 
-def table(rows: list[tuple[Schedule, float, HeldOutErrors]], config_rays: int) -> str:
-    reference = rows[0][2].depth_l1_m
+def table(rows: list[tuple[Schedule, float, float, HeldOutErrors]], config_rays: int) -> str:
+    reference = rows[0]
     lines = [
-        "| schedule | iterations | lr factor | rays | lr decay to | time (s) "
-        f"| held-out depth L1 (cm) | vs {rows[0][0].name} | surface SDF (cm) |",
-        "|---|---:|---:|---:|---:|---:|---:|---:|---:|",
+        "| schedule | TSDF warm start (steps x points, band, lr factor) | iterations "
+        "| lr factor | rays | lr decay to | time (s) | CPU time (s) | CPU vs "
+        f"{reference[0].name} | held-out depth L1 (cm) | vs {reference[0].name} "
+        "| surface SDF (cm) |",
+        "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
-    for schedule, seconds, errors in rows:
+    for schedule, seconds, cpu, errors in rows:
         l1 = errors.depth_l1_m
+        warm = (
+            f"{schedule.warm_steps} x {schedule.warm_points}, {schedule.warm_band:g}, "
+            f"{schedule.warm_factor:g}"
+            if schedule.warm_steps
+            else "-"
+        )
         lines.append(
-            f"| {schedule.name} | {schedule.iterations} | {schedule.lr_factor:g} "
+            f"| {schedule.name} | {warm} | {schedule.iterations} | {schedule.lr_factor:g} "
             f"| {schedule.rays or config_rays} | {schedule.decay:g} | {seconds:.1f} "
-            f"| {100 * l1:.3f} | {l1 / reference:.2f}x | {100 * errors.surface_sdf_m:.3f} |"
+            f"| {cpu:.1f} | {cpu / reference[2]:.3f} "
+            f"| {100 * l1:.3f} | {l1 / reference[3].depth_l1_m:.2f}x "
+            f"| {100 * errors.surface_sdf_m:.3f} |"
         )
     return "\n".join(lines) + "\n"
 
@@ -137,7 +160,11 @@ def table(rows: list[tuple[Schedule, float, HeldOutErrors]], config_rays: int) -
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--config", default="demo.yaml", help="config under eslam/configs")
-    parser.add_argument("--schedule", action="append", help="NAME:ITER:FACTOR:RAYS:DECAY")
+    parser.add_argument(
+        "--schedule",
+        action="append",
+        help="NAME:ITER:FACTOR:RAYS:DECAY[:WARM_STEPS:WARM_POINTS[:WARM_BAND[:WARM_FACTOR]]]",
+    )
     parser.add_argument("--held-out", type=int, nargs="+", default=[3, 6, 9])
     parser.add_argument("--pixel-step", type=int, default=7)
     parser.add_argument(
