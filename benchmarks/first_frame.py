@@ -1,7 +1,8 @@
 """The first mapping call: held-out depth L1 and time per schedule, on a synthetic scene.
 
 For each schedule (iterations, learning-rate factor, rays per step, cosine decay of the
-learning rates to a final fraction) a fresh field (seeded) is fit to frame 0 of the
+learning rates to a final fraction, and optionally a TSDF warm start before them,
+:mod:`eslam.slam.warm_start`) a fresh field (seeded) is fit to frame 0 of the
 demo's synthetic room with its ground-truth pose, exactly as the run loop's first
 mapping call does (:func:`eslam.slam.mapping.map_window`). The quality figures
 (:func:`eslam.render.held_out.held_out_errors`) are taken over every ``--pixel-step``-th
@@ -10,12 +11,16 @@ valid pixel of frames ``--held-out`` (never mapped) whose surface point frame 0 
 depth| at the true poses, the surface found where the TSDF crosses zero along each
 pixel's ray, as a mesh would show it) and the surface SDF (mean |T s(p)| at the
 measured points, the SDF tracker's residual at the true pose). Time is the wall
-time of the mapping call.
+time of the mapping call and its CPU time (the process's; with ``--threads 1`` the
+work done, which a loaded machine inflates less than the wall time).
 
     python benchmarks/first_frame.py                          # the default schedules
     python benchmarks/first_frame.py --schedule fast:150:5:4000:0.1 --config demo.yaml
+    python benchmarks/first_frame.py --schedule warm:30:2:0:1:400:4000:0.25:20
 
-Schedules are NAME:ITERATIONS:LR_FACTOR:RAYS:DECAY (RAYS 0 = the config's mapping.rays).
+Schedules are NAME:ITERATIONS:LR_FACTOR:RAYS:DECAY (RAYS 0 = the config's mapping.rays),
+optionally followed by :WARM_STEPS:WARM_POINTS[:WARM_BAND[:WARM_LR_FACTOR]] for a TSDF
+warm start (band share 0.25 and rate factor 20 unless given).
 Prints a markdown table and, unless ``--no-append``, appends it to docs/benchmarks.md.
 """
 
@@ -57,6 +62,8 @@ DEFAULT_SCHEDULES = (
     "short-decay:150:5:0:0.1",
     "short-wide-decay:150:5:8000:0.1",
     "tiny-wide-decay:60:5:8000:0.1",
+    "warm-only:0:5:0:1:400:4000",
+    "cpu-preset:30:2:0:1:400:4000",
 )
 
 
