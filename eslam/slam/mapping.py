@@ -9,7 +9,8 @@ optimiser is made per call, as in the release, so the map file needs no optimise
 
 :func:`mapping_step` is one iteration and never synchronises with the host; the
 benchmarks time this same function. :func:`mapping_schedule` says how long each call
-optimises (the first frame longer and faster, as the release does).
+optimises (the first frame longer and faster, as the release does, or after a TSDF
+warm start, :mod:`eslam.slam.warm_start`).
 """
 
 from __future__ import annotations
@@ -242,7 +243,8 @@ def map_window(
         poses: (W, 4, 4) their current camera-to-world poses.
         optimise: per keyframe, whether its pose is refined.
         schedule: iterations, learning-rate factor and decay, rays
-            (:func:`mapping_schedule`).
+            (:func:`mapping_schedule`), and the TSDF warm start run first on
+            ``views[0]`` at ``poses[0]`` when it has one.
         on_step: called with k after the k-th iteration (1, 2, ...): a count for
             progress reports, never a value read from the device (no host sync).
     """
