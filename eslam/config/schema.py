@@ -412,6 +412,14 @@ class MappingConfig:
     first_lr_decay: float = 1.0
     """The first frame's map learning rates fall (cosine) from ``first_lr_factor`` times
     their value to this fraction of that by the last step; 1 = constant (release)."""
+    first_warm_start: Literal["none", "tsdf"] = "none"
+    """Before the first frame's rendering steps: none (release) or tsdf, a regression of
+    the geometry planes and SDF decoder onto the first depth image's projective TSDF
+    (eslam/slam/warm_start.py; with it 30 rendering steps match 1000 without)."""
+    first_warm_start_steps: int = 400
+    """Adam steps of the tsdf warm start."""
+    first_warm_start_points: int = 4000
+    """Points per step of the tsdf warm start (one geometry query each, no rendering)."""
     lr_decoders: float = 0.001
     """Adam learning rate of the decoders and beta (paper)."""
     lr_planes: float = 0.005
@@ -436,6 +444,12 @@ class MappingConfig:
         _at_least(self, "rays", 1)
         _at_least(self, "iterations", 0)
         _at_least(self, "first_iterations", 0)
+        _at_least(self, "first_warm_start_steps", 0)
+        _at_least(self, "first_warm_start_points", 1)
+        if self.first_warm_start not in ("none", "tsdf"):
+            raise ValueError(
+                f"first_warm_start must be none or tsdf, got {self.first_warm_start!r}"
+            )
         if self.view_cache_mb < 0:
             raise ValueError(f"view_cache_mb must be >= 0 (0 = off), got {self.view_cache_mb}")
         if self.first_rays is not None and self.first_rays < 1:

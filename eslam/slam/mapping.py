@@ -9,7 +9,8 @@ optimiser is made per call, as in the release, so the map file needs no optimise
 
 :func:`mapping_step` is one iteration and never synchronises with the host; the
 benchmarks time this same function. :func:`mapping_schedule` says how long each call
-optimises (the first frame longer and faster, as the release does).
+optimises (the first frame longer and faster, as the release does, or after a TSDF
+warm start, :mod:`eslam.slam.warm_start`).
 """
 
 from __future__ import annotations
@@ -34,6 +35,7 @@ from eslam.slam.views import (
     render_drawn,
     view_rays,
 )
+from eslam.slam.warm_start import WarmStart, tsdf_warm_start
 from eslam.stages import stage
 
 
@@ -68,12 +70,15 @@ class MappingSchedule:
         lr_factor: multiplier of the map learning rates at the first step.
         rays: rays per step over the whole window.
         lr_decay: the map learning rates end at this fraction of their start (cosine).
+        warm_start: a TSDF regression on the window's first view before the rendering
+            steps (:mod:`eslam.slam.warm_start`), or None.
     """
 
     iterations: int
     lr_factor: float
     rays: int
     lr_decay: float = 1.0
+    warm_start: WarmStart | None = None
 
     def lr_scale(self, step: int) -> float:
         """Map learning-rate multiplier at ``step`` (0-based) relative to the start:
@@ -89,15 +94,21 @@ def mapping_schedule(config: MappingConfig, first: bool) -> MappingSchedule:
 
     The first call (the map is empty) runs ``first_iterations`` at ``first_lr_factor``
     times the learning rates (release: 1000 at 5x, constant), with ``first_rays`` rays
-    and the rates decaying to ``first_lr_decay`` of their start; later calls run
-    ``iterations`` at 1x with ``rays``.
+    and the rates decaying to ``first_lr_decay`` of their start, after the TSDF warm start
+    when ``first_warm_start`` is tsdf; later calls run ``iterations`` at 1x with ``rays``.
     """
     if first:
+        warm = (
+            WarmStart(config.first_warm_start_steps, config.first_warm_start_points)
+            if config.first_warm_start == "tsdf"
+            else None
+        )
         return MappingSchedule(
             iterations=config.first_iterations,
             lr_factor=config.first_lr_factor,
             rays=config.first_rays or config.rays,
             lr_decay=config.first_lr_decay,
+            warm_start=warm,
         )
     return MappingSchedule(iterations=config.iterations, lr_factor=1.0, rays=config.rays)
 
@@ -256,10 +267,21 @@ def map_window(
         poses: (W, 4, 4) their current camera-to-world poses.
         optimise: per keyframe, whether its pose is refined.
         schedule: iterations, learning-rate factor and decay, rays
-            (:func:`mapping_schedule`).
+            (:func:`mapping_schedule`), and the TSDF warm start run first on
+            ``views[0]`` at ``poses[0]`` when it has one.
         on_step: called with k after the k-th iteration (1, 2, ...): a count for
             progress reports, never a value read from the device (no host sync).
     """
+    if schedule.warm_start is not None:
+        tsdf_warm_start(
+            field,
+            views[0],
+            poses[0],
+            schedule.warm_start,
+            settings.mapping.lr_planes,
+            settings.mapping.lr_decoders,
+            generator,
+        )
     window = WindowPoses.create(poses, optimise)
     optimiser = mapping_optimiser(field, window, settings.mapping, schedule.lr_factor)
     map_groups = optimiser.param_groups[:2]  # planes, decoders (poses keep their rate)
