@@ -44,6 +44,7 @@ from eslam.slam.mapping import (
     MappingSchedule,
     MappingSettings,
     map_window,
+    warm_start_window,
 )
 from eslam.slam.static_steps import (
     StaticMapping,
@@ -276,9 +277,13 @@ class WindowMapper:
             and not self.failed
             and use_cuda_graphs(self.mode, views[0].depth.device)
         )
+        if graphs:  # as map_window: the warm start (eager) before the rendering steps
+            warm_start_window(field, views, poses, self.settings, schedule, generator)
         replay = (
             self._replay(field, views, poses, optimise, schedule, generator) if graphs else None
         )
+        if replay is None and graphs and schedule.warm_start is not None:
+            schedule = dataclasses.replace(schedule, warm_start=None)  # it ran above
         if replay is None:
             return map_window(
                 field, views, poses, optimise, self.settings, schedule, generator, on_step

@@ -250,6 +250,28 @@ def mapping_step(
     return loss.detach()
 
 
+def warm_start_window(
+    field: SceneField,
+    views: list[View],
+    poses: torch.Tensor,
+    settings: MappingSettings,
+    schedule: MappingSchedule,
+    generator: torch.Generator,
+) -> None:
+    """The TSDF warm start of ``schedule`` (if it has one) on ``views[0]`` at ``poses[0]``:
+    what a mapping call runs before its rendering steps (:mod:`eslam.slam.warm_start`)."""
+    if schedule.warm_start is not None:
+        tsdf_warm_start(
+            field,
+            views[0],
+            poses[0],
+            schedule.warm_start,
+            settings.mapping.lr_planes,
+            settings.mapping.lr_decoders,
+            generator,
+        )
+
+
 def map_window(
     field: SceneField,
     views: list[View],
@@ -272,16 +294,7 @@ def map_window(
         on_step: called with k after the k-th iteration (1, 2, ...): a count for
             progress reports, never a value read from the device (no host sync).
     """
-    if schedule.warm_start is not None:
-        tsdf_warm_start(
-            field,
-            views[0],
-            poses[0],
-            schedule.warm_start,
-            settings.mapping.lr_planes,
-            settings.mapping.lr_decoders,
-            generator,
-        )
+    warm_start_window(field, views, poses, settings, schedule, generator)
     window = WindowPoses.create(poses, optimise)
     optimiser = mapping_optimiser(field, window, settings.mapping, schedule.lr_factor)
     map_groups = optimiser.param_groups[:2]  # planes, decoders (poses keep their rate)

@@ -21,6 +21,7 @@ from eslam.slam.graphed import GraphedRenderTracker, WindowMapper, use_cuda_grap
 from eslam.slam.mapping import MappingSchedule, MappingSettings, map_window
 from eslam.slam.trackers import make_tracker
 from eslam.slam.tracking import RenderTracker, TrackingSettings, track_frame
+from eslam.slam.warm_start import WarmStart
 from tests.slam.test_static_steps import moved, window_views
 from tests.slam.test_steps import BOUND, _setup
 
@@ -183,3 +184,25 @@ def test_a_failed_capture_falls_back_to_the_eager_steps(
     assert mapper.failed and "capturing an iteration failed" in caplog.text
     assert torch.equal(ours.poses, eager.poses)
     assert all(map(torch.equal, field.parameters(), other.parameters()))
+
+
+def test_graphed_first_call_runs_the_warm_start_as_map_window(device: str) -> None:
+    """A first call with a TSDF warm start (the CPU preset's first frame): the warm start
+    runs before the graphed rendering steps, and field, poses and generator end where
+    map_window leaves them (without it the field would differ)."""
+    config, eager_field, _ = _setup(device)
+    graph_field = copy.deepcopy(eager_field)
+    settings = MappingSettings(config.mapping, config.render, config.loss)
+    views = window_views(1, device)
+    poses = moved(0, device)[None]
+    schedule = MappingSchedule(2, 2.0, 64, warm_start=WarmStart(steps=3, points=200))
+    eager_generator = torch.Generator(device=device).manual_seed(9)
+    graph_generator = torch.Generator(device=device).manual_seed(9)
+    eager = map_window(eager_field, views, poses, [False], settings, schedule, eager_generator)
+    mapper = WindowMapper(settings, "auto")
+    ours = mapper.map(graph_field, views, poses, [False], schedule, graph_generator)
+    assert mapper.captures == 1
+    assert _close(ours.poses, eager.poses) and _close(ours.loss, eager.loss)
+    for a, b in zip(graph_field.parameters(), eager_field.parameters(), strict=True):
+        assert _close(a.detach(), b.detach())
+    assert torch.equal(graph_generator.get_state(), eager_generator.get_state())
