@@ -20,7 +20,13 @@ from eslam.geometry.pose import extrapolate_constant_velocity
 from eslam.render.renderer import SceneFieldLike
 from eslam.slam.graphed import GraphedRenderTracker
 from eslam.slam.sdf_tracking import HybridTracker, SdfTracker
-from eslam.slam.tracking import RenderTracker, TrackingResult, TrackingSettings
+from eslam.slam.tracking import (
+    RenderTracker,
+    TrackingResult,
+    TrackingSettings,
+    compiled_tracking_loss,
+    tracking_loss,
+)
 from eslam.slam.views import View
 
 
@@ -40,10 +46,12 @@ class Tracker(Protocol):
 
 def _renderer(config: ESLAMConfig, settings: TrackingSettings) -> RenderTracker:
     """The rendering tracker with ``settings``; with ``compute.cuda_graphs`` not off, the
-    one that replays CUDA graphs where it can (:mod:`eslam.slam.graphed`)."""
+    one that replays CUDA graphs where it can (:mod:`eslam.slam.graphed`; the replays
+    do not use the compiled loss); its loss compiled with ``compute.compile: tracking``."""
+    loss = compiled_tracking_loss() if config.compute.compile == "tracking" else tracking_loss
     if config.compute.cuda_graphs == "off":
-        return RenderTracker(settings)
-    return GraphedRenderTracker(settings, mode=config.compute.cuda_graphs)
+        return RenderTracker(settings, loss)
+    return GraphedRenderTracker(settings, loss, mode=config.compute.cuda_graphs)
 
 
 def _render_tracker(config: ESLAMConfig) -> RenderTracker:

@@ -209,3 +209,53 @@ def test_every_stage_of_both_steps_is_a_profiler_region(monkeypatch: pytest.Monk
     assert totals["backward"] == 10.0 and totals["ray sampling"] >= 20.0
     with pytest.raises(ValueError, match="unknown stage"):
         stage("everything")
+
+
+def test_a_compiled_tracking_loss_tracks_as_the_eager_one() -> None:
+    """compute.compile=tracking: the trackers get a compiled loss (render and hybrid; off
+    keeps the eager one), and tracking with a compiled loss gives the eager pose. The
+    test compiles with the aot_eager backend (the same trace and autograd split as
+    inductor, without a C++ build; inductor's speed is benchmarks/bench_compile.py's)."""
+    from eslam.config import ComputeConfig
+    from eslam.slam.trackers import make_tracker
+    from eslam.slam.tracking import compiled_tracking_loss, track_frame, tracking_loss
+
+    config, field, view = _setup()
+    compiled = dataclasses.replace(config, compute=ComputeConfig(compile="tracking"))
+    for method in ("render", "hybrid"):
+        tracking = dataclasses.replace(config.tracking, method=method)
+        on = make_tracker(dataclasses.replace(compiled, tracking=tracking))
+        off = make_tracker(dataclasses.replace(config, tracking=tracking))
+        on, off = (t if method == "render" else t.render for t in (on, off))  # type: ignore[attr-defined]
+        assert on.loss_function is not tracking_loss and off.loss_function is tracking_loss
+    with pytest.raises(ValueError, match="compile must be off or tracking"):
+        ComputeConfig(compile="all")  # type: ignore[arg-type]
+
+    torch._dynamo.reset()
+    settings = TrackingSettings(
+        dataclasses.replace(config.tracking.render, rays=100, iterations=3),
+        config.render,
+        config.loss,
+    )
+    start = torch.eye(4)
+    start[:3, 3] = torch.tensor([0.01, -0.02, 0.01])
+    eager = track_frame(field, view, start, settings, torch.Generator().manual_seed(4))
+    ours = track_frame(
+        field,
+        view,
+        start,
+        settings,
+        torch.Generator().manual_seed(4),
+        compiled_tracking_loss(backend="aot_eager"),
+    )
+    assert torch.allclose(ours.pose, eager.pose, atol=1e-6)
+    assert torch.allclose(ours.loss, eager.loss, rtol=1e-5)
+    assert not torch.equal(eager.pose, start)  # the pose moved: the comparison means something
+    calls = []
+
+    def counted(*args):
+        calls.append(1)
+        return tracking_loss(*args)
+
+    track_frame(field, view, start, settings, torch.Generator().manual_seed(4), counted)
+    assert len(calls) == 3  # the loss given is the one every iteration uses
