@@ -105,6 +105,34 @@ def add_device_argument(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def add_timing_arguments(parser: argparse.ArgumentParser, repeats: int, warmup: int) -> None:
+    """The options every timing script shares: ``--device``, ``--repeats`` timed and
+    ``--warmup`` untimed iterations (defaults given), ``--threads``, and where the
+    section goes (``--docs``, ``--no-append``, ``--note``). Check them with
+    :func:`check_timing_arguments`."""
+    add_device_argument(parser)
+    parser.add_argument("--repeats", type=int, default=repeats, help=f"timed ({repeats})")
+    parser.add_argument("--warmup", type=int, default=warmup, help=f"untimed ({warmup})")
+    parser.add_argument(
+        "--threads", type=int, default=0, help="torch intra-op threads; 0 = torch's default"
+    )
+    parser.add_argument("--no-append", action="store_true", help="print only")
+    parser.add_argument(
+        "--docs", type=Path, default=DEFAULT_DOCS, help="markdown file to append to"
+    )
+    parser.add_argument("--note", default="", help="a remark printed with the machine")
+
+
+def check_timing_arguments(parser: argparse.ArgumentParser, args: argparse.Namespace) -> None:
+    """Stop with a usage error on counts out of range; resolve the device; apply
+    ``--threads`` (torch's intra-op threads, when above 0)."""
+    if args.repeats < 1 or args.warmup < 0 or args.threads < 0:
+        parser.error("--repeats must be >= 1, --warmup and --threads >= 0")
+    check_device(parser, args)
+    if args.threads > 0:
+        torch.set_num_threads(args.threads)
+
+
 def check_device(parser: argparse.ArgumentParser, args: argparse.Namespace) -> None:
     """Resolve ``args.device`` in place (auto -> a concrete name), or stop with a usage error."""
     try:

@@ -33,13 +33,11 @@ import argparse
 import copy
 import time
 from collections.abc import Callable
-from pathlib import Path
 
 import torch
 from _machine import (
-    DEFAULT_DOCS,
-    add_device_argument,
-    check_device,
+    add_timing_arguments,
+    check_timing_arguments,
     command_line,
     load_average,
     publish,
@@ -169,28 +167,14 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(
         description="eager against CUDA graphs: ms per tracking frame and mapping call"
     )
-    add_device_argument(parser)
-    parser.add_argument("--repeats", type=int, default=10, help="timed frames and calls")
-    parser.add_argument("--warmup", type=int, default=2, help="untimed frames and calls")
-    parser.add_argument(
-        "--threads", type=int, default=0, help="torch intra-op threads; 0 = torch's default"
-    )
-    parser.add_argument("--no-append", action="store_true", help="print only")
-    parser.add_argument(
-        "--docs", type=Path, default=DEFAULT_DOCS, help="markdown file to append to"
-    )
-    parser.add_argument("--note", default="", help="a remark printed with the machine")
+    add_timing_arguments(parser, repeats=10, warmup=2)
     args = parser.parse_args(argv)
-    if args.repeats < 1 or args.warmup < 0 or args.threads < 0:
-        parser.error("--repeats must be >= 1, --warmup and --threads >= 0")
-    check_device(parser, args)
+    check_timing_arguments(parser, args)
     return args
 
 
 def main(argv: list[str] | None = None) -> None:
     args = parse_args(argv)
-    if args.threads > 0:
-        torch.set_num_threads(args.threads)
     device = torch.device(args.device)
     command = command_line("benchmarks/bench_graphs.py", argv)
     load_start = load_average()
