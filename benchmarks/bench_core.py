@@ -45,14 +45,12 @@ import dataclasses
 import datetime
 import time
 from collections.abc import Callable
-from pathlib import Path
 
 import numpy as np
 import torch
 from _machine import (
-    DEFAULT_DOCS,
-    add_device_argument,
-    check_device,
+    add_timing_arguments,
+    check_timing_arguments,
     command_line,
     load_average,
     machine_lines,
@@ -530,17 +528,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         description="ms per tracking / mapping iteration at the paper's Replica settings "
         "for each plane sampling, where the time goes, and the per-frame work."
     )
-    add_device_argument(parser)
-    parser.add_argument("--repeats", type=int, default=20, help="timed iterations (default 20)")
-    parser.add_argument("--warmup", type=int, default=3, help="untimed iterations (default 3)")
-    parser.add_argument(
-        "--threads", type=int, default=0, help="torch intra-op threads; 0 = torch's default"
-    )
-    parser.add_argument("--no-append", action="store_true", help="print only")
-    parser.add_argument(
-        "--docs", type=Path, default=DEFAULT_DOCS, help="markdown file to append to"
-    )
-    parser.add_argument("--note", default="", help="a remark printed with the machine")
+    add_timing_arguments(parser, repeats=20, warmup=3)
     parser.add_argument(
         "--samplings",
         nargs="+",
@@ -570,16 +558,14 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     args = parser.parse_args(argv)
     args.samplings = tuple(dict.fromkeys(args.samplings))
     args.benchmarks = tuple(dict.fromkeys(args.benchmarks))
-    if args.repeats < 1 or args.warmup < 0 or args.threads < 0 or args.profile_repeats < 0:
-        parser.error("--repeats must be >= 1, --warmup, --threads and --profile-repeats >= 0")
-    check_device(parser, args)
+    if args.profile_repeats < 0:
+        parser.error("--profile-repeats must be >= 0")
+    check_timing_arguments(parser, args)
     return args
 
 
 def main(argv: list[str] | None = None) -> None:
     args = parse_args(argv)
-    if args.threads > 0:
-        torch.set_num_threads(args.threads)
     device = torch.device(args.device)
     command = command_line("benchmarks/bench_core.py", argv)
     load_start = load_average()

@@ -18,10 +18,8 @@ from eslam.slam.warm_start import (
     tsdf_warm_start,
     warm_start_points,
 )
-from eslam.types import Intrinsics
+from tests.slam.test_steps import BOUND, CAMERA
 
-CAMERA = Intrinsics(width=40, height=30, fx=30.0, fy=30.0, cx=19.5, cy=14.5)
-BOUND = torch.tensor([[-1.0, 1.0], [-1.0, 1.0], [-1.0, 1.5]])
 T = 0.06
 
 
