@@ -14,7 +14,9 @@ Cases (each a run folder under ``--out``):
   with the demo's CPU preset.
 
 ``--methods render sdf hybrid`` runs every case once per tracker (``tracking.method``);
-the table then also gives the Sim(3) scale, the median tracking time per frame after
+the table then also gives the Sim(3) scale, the relative pose error between consecutive
+frames (RMSE of translation and rotation, metrics.json's ``rpe_*``), the median tracking
+time per frame after
 frame 0, frames per second (frames / wall time of the run) and the frames the tracker
 reported as failed.
 
@@ -172,16 +174,18 @@ def tracker_figures(row: Row) -> tuple[float, float, float, float]:
 def table(rows: list[Row], methods: bool) -> str:
     if methods:
         lines = [
-            "| case | tracker | frames | ATE RMSE (cm) | Sim(3) scale | tracking (s/frame) "
-            "| FPS | to first pose (s) | failed frames | peak memory (MB) |",
-            "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|",
+            "| case | tracker | frames | ATE RMSE (cm) | Sim(3) scale | RPE (mm, deg) "
+            "| tracking (s/frame) | FPS | to first pose (s) | failed frames | peak memory (MB) |",
+            "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
         ]
         for row in rows:
             m = row.result.metrics
             scale, tracking, fps, first_pose = tracker_figures(row)
             lines.append(
                 f"| {row.case.name} | {row.method} | {m['frames']} "
-                f"| {m.get('ate_rmse_cm', float('nan')):.2f} | {scale:.4f} | {tracking:.3f} "
+                f"| {m.get('ate_rmse_cm', float('nan')):.2f} | {scale:.4f} "
+                f"| {m.get('rpe_translation_rmse_mm', float('nan')):.2f}, "
+                f"{m.get('rpe_rotation_rmse_deg', float('nan')):.3f} | {tracking:.3f} "
                 f"| {fps:.3f} | {first_pose:.1f} | {m.get('tracking_failures', '-')} "
                 f"| {m['peak_memory_mb']:.0f} |"
             )

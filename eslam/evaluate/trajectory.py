@@ -1,4 +1,5 @@
-"""Absolute trajectory error (ATE) after Umeyama alignment (docs/method.md section 6)."""
+"""Absolute trajectory error (ATE) after Umeyama alignment (docs/method.md section 6), and
+the relative pose error (RPE) between consecutive poses."""
 
 from __future__ import annotations
 
@@ -128,6 +129,86 @@ def absolute_trajectory_error(
         alignment=alignment,
         errors=errors,
         excluded=int(np.count_nonzero(~keep)),
+    )
+
+
+@dataclass(frozen=True)
+class RPEResult:
+    """Relative pose error over ``pairs`` pose pairs ``delta`` frames apart.
+
+    Attributes:
+        translation_rmse, translation_median: of |trans(E_i)|, metres.
+        rotation_rmse, rotation_median: of angle(rot(E_i)), degrees.
+        pairs: pose pairs used (both poses of a pair finite in both trajectories).
+        delta: frames between the two poses of a pair.
+    """
+
+    translation_rmse: float
+    translation_median: float
+    rotation_rmse: float
+    rotation_median: float
+    pairs: int
+    delta: int
+
+    def as_dict(self) -> dict[str, float | int]:
+        """The statistics in millimetres and degrees, with the pair count."""
+        return {
+            "rpe_translation_rmse_mm": 1000 * self.translation_rmse,
+            "rpe_translation_median_mm": 1000 * self.translation_median,
+            "rpe_rotation_rmse_deg": self.rotation_rmse,
+            "rpe_rotation_median_deg": self.rotation_median,
+            "rpe_pairs": self.pairs,
+        }
+
+
+def relative_pose_error(
+    estimated: np.ndarray, ground_truth: np.ndarray, delta: int = 1
+) -> RPEResult:
+    """RPE of camera-to-world poses, as Sturm et al. (IROS 2012, the TUM RGB-D benchmark)
+    define it and evo's ``evo_rpe --delta 1 --delta_unit f`` computes it:
+
+        E_i = (Q_i^-1 Q_{i+delta})^-1 (P_i^-1 P_{i+delta})
+
+    with Q the ground truth and P the estimate, matched row by row; the translation
+    error is |trans(E_i)| and the rotation error the angle of rot(E_i),
+    arccos((trace(R) - 1) / 2). Needs no alignment (relative motions do not depend on
+    the world frame), so it measures the per-frame tracking error (jitter and local
+    drift) that the ATE mixes with the drift accumulated over the whole run.
+
+    Args:
+        estimated, ground_truth: (N, 4, 4) camera-to-world poses. A pair with a
+            non-finite pose in either trajectory is left out.
+        delta: frames between the two poses of a pair (>= 1).
+
+    Raises:
+        ValueError: shapes differ, delta < 1, or no usable pair.
+    """
+    estimated = np.asarray(estimated, dtype=np.float64)
+    ground_truth = np.asarray(ground_truth, dtype=np.float64)
+    if estimated.shape != ground_truth.shape or estimated.shape[1:] != (4, 4):
+        raise ValueError(
+            f"need two (N, 4, 4) pose arrays, got {estimated.shape} and {ground_truth.shape}"
+        )
+    if delta < 1:
+        raise ValueError(f"delta must be at least 1 frame, got {delta}")
+    finite = np.isfinite(estimated).all(axis=(1, 2)) & np.isfinite(ground_truth).all(axis=(1, 2))
+    first = np.flatnonzero(finite[:-delta] & finite[delta:]) if len(finite) > delta else []
+    if len(first) == 0:
+        raise ValueError(f"no pair of finite poses {delta} frame(s) apart")
+    second = first + delta
+    motion_gt = np.linalg.inv(ground_truth[first]) @ ground_truth[second]
+    motion_est = np.linalg.inv(estimated[first]) @ estimated[second]
+    error = np.linalg.inv(motion_gt) @ motion_est
+    translation = np.linalg.norm(error[:, :3, 3], axis=1)
+    cosine = (np.trace(error[:, :3, :3], axis1=1, axis2=2) - 1.0) / 2.0
+    rotation = np.degrees(np.arccos(np.clip(cosine, -1.0, 1.0)))
+    return RPEResult(
+        translation_rmse=float(np.sqrt(np.mean(translation**2))),
+        translation_median=float(np.median(translation)),
+        rotation_rmse=float(np.sqrt(np.mean(rotation**2))),
+        rotation_median=float(np.median(rotation)),
+        pairs=len(first),
+        delta=delta,
     )
 
 

@@ -30,7 +30,7 @@ import numpy as np
 from eslam.config import ESLAMConfig
 from eslam.data.realtime import LatestFrameReader
 from eslam.errors import OutputError, RunStopped
-from eslam.evaluate.trajectory import absolute_trajectory_error
+from eslam.evaluate.trajectory import absolute_trajectory_error, relative_pose_error
 from eslam.io.run_dir import RunDirectory, write_json
 from eslam.io.trajectory import write_tum_trajectory
 from eslam.slam.observers import FrameDone, RunEnd, RunObserverBase, RunStart
@@ -93,7 +93,8 @@ def run_metrics(state: SLAMState, device: str, peak_memory_mb: float) -> dict:
     the failed frames and mean iterations, and with ground truth the ATE.
 
     FPT (seconds per frame) = (sum of tracking and mapping times) / frames. The ATE
-    (rigid alignment, cm) uses the frames whose estimate and ground truth are both finite.
+    (rigid alignment, cm) uses the frames whose estimate and ground truth are both finite;
+    the RPE (mm and degrees per frame) the consecutive pairs of such frames.
     """
     done = state.next_frame
     metrics: dict = {
@@ -114,6 +115,8 @@ def run_metrics(state: SLAMState, device: str, peak_memory_mb: float) -> dict:
         if usable.sum() >= 3:
             metrics.update(absolute_trajectory_error(poses[usable], gt[usable]).as_cm())
             metrics["ate_frames"] = int(usable.sum())
+        if (usable[:-1] & usable[1:]).any():
+            metrics.update(relative_pose_error(poses, gt).as_dict())
     return metrics
 
 

@@ -109,7 +109,7 @@ def test_resume_finds_moved_data_and_refuses_changed_data(
     # the interrupted run has its trajectory and metrics: eval scores it from anywhere
     assert main(["eval", str(run), "--views", "0"]) == 0
     metrics = json.loads((run / "metrics.json").read_text())
-    assert metrics["frames"] == 6 and metrics["ate_frames"] == 6
+    assert metrics["frames"] == 6 and metrics["ate_frames"] == 6 and metrics["rpe_pairs"] == 5
     capsys.readouterr()
 
     saved = _snapshot(run)
