@@ -317,8 +317,17 @@ class SdfTrackerConfig:
     default: it made whole demo runs worse; docs/tracking.md)."""
     colour_robust_scale: float = 0.1
     """Scale of the robust loss on the colour residual, in colour units [0, 1]."""
+    noise_reference_depth: float | None = None
+    """Depth z0 (metres) at which a point's SDF residual keeps its size: each residual
+    (and Jacobian row) is divided by (z / z0)^2, the quadratic growth of a depth
+    sensor's noise with distance (structured light, stereo: Khoshelham and Elberink
+    2012), so near points, measured more precisely, weigh more; null = every point
+    alike (the default)."""
 
     def __post_init__(self) -> None:
+        reference = self.noise_reference_depth
+        if reference is not None and not reference > 0:
+            raise ValueError(f"noise_reference_depth must be > 0 metres or null, got {reference}")
         if self.colour_weight < 0 or self.colour_robust_scale <= 0:
             raise ValueError("colour_weight must be >= 0 and colour_robust_scale > 0")
         if not self.levels or min(self.levels) < 6 or list(self.levels) != sorted(self.levels):

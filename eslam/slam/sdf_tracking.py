@@ -21,6 +21,13 @@ accepting it when the robust cost drops (lambda shrinks) and rejecting it otherw
 (lambda grows). The points are a fixed, seeded subset of the frame's valid pixels,
 used coarse to fine (the first ``levels[0]`` points, then more).
 
+**Depth noise** (``noise_reference_depth`` z0; off by default). Depth from structured
+light or stereo is noisier far away, sigma(z) proportional to z^2 (Khoshelham and
+Elberink 2012), so with z0 set each residual and its Jacobian row are divided by
+sigma(z_i) / sigma(z0) = (z_i / z0)^2 before the robust weights: weighted least squares
+with w_i ~ z_i^-4, near points counting more (as DVO-SLAM and ElasticFusion weight their
+depth terms).
+
 **Colour term** (``colour_weight`` lambda > 0; off by default). Dense photometric
 alignment (Steinbruecker, Sturm and Cremers 2011; Kerl, Sturm and Cremers 2013), here
 against the map's decoded colour at the point as in Bylow et al.'s colour extension of
@@ -90,6 +97,17 @@ def robust_cost(residual: torch.Tensor, scale: float, kind: str) -> torch.Tensor
         squared = residual.square()
         return 0.5 * scale**2 * squared / (squared + scale**2)
     raise ValueError(f"robust must be 'huber' or 'geman_mcclure', got '{kind}'")
+
+
+def depth_noise_scale(depth: torch.Tensor, reference: float | None) -> torch.Tensor:
+    """(N,) sigma(z) / sigma(z0) = (z / z0)^2 for camera depths z (metres): the
+    standard deviation of structured-light and stereo depth grows with the square of the
+    distance (Khoshelham and Elberink 2012, Kinect v1: sigma(z) ~ 1.4 mm z^2 / m^2; the
+    same law for disparity-based sensors), so a residual divided by it is in units of the
+    noise at z0. Ones when ``reference`` is None (every point alike)."""
+    if reference is None:
+        return torch.ones_like(depth)
+    return (depth / reference).square()
 
 
 def inside_bound(points: torch.Tensor, bound: torch.Tensor) -> torch.Tensor:
@@ -165,7 +183,9 @@ def linearise(
     colours: torch.Tensor | None = None,
 ) -> Linearisation:
     """Residuals r_i = T s(T q_i), their robust weights and J^T W J, J^T W r (module doc);
-    with ``config.colour_weight`` > 0 also the colour term against ``colours`` (N, 3),
+    with ``config.noise_reference_depth`` z0 set, r_i and J_i divided by (z_i / z0)^2
+    first (:func:`depth_noise_scale`; ``residual`` stays in metres); with
+    ``config.colour_weight`` > 0 also the colour term against ``colours`` (N, 3),
     the frame's observed colour at the points' pixels in [0, 1].
 
     The field's parameters must not require gradients (only the points do).
@@ -177,14 +197,18 @@ def linearise(
     points = (points_cam @ pose[:3, :3].T + pose[:3, 3]).detach()
     sdf, gradient, rgb, rgb_gradient = field_derivatives(field, points, with_colour)
     residual = truncation * sdf
+    noise = depth_noise_scale(points_cam[:, 2], config.noise_reference_depth)
+    normalised = residual / noise
     valid = (sdf.abs() < config.max_sdf) & inside_bound(points, field.bound)
-    weight = robust_weights(residual, config.robust_scale, config.robust) * valid
+    weight = robust_weights(normalised, config.robust_scale, config.robust) * valid
     far = torch.full_like(residual, truncation)
-    cost = robust_cost(torch.where(valid, residual, far), config.robust_scale, config.robust)
-    jacobian = (truncation * twist_jacobian(points, gradient)).double()
+    cost = robust_cost(
+        torch.where(valid, residual, far) / noise, config.robust_scale, config.robust
+    )
+    jacobian = (truncation * twist_jacobian(points, gradient) / noise[:, None]).double()
     weighted = jacobian * weight.double()[:, None]
     hessian = weighted.T @ jacobian
-    gradient_xi = weighted.T @ residual.double()
+    gradient_xi = weighted.T @ normalised.double()
     cost = cost.sum()
     if with_colour:
         assert colours is not None and rgb is not None and rgb_gradient is not None

@@ -19,6 +19,7 @@ from eslam.render.rays import camera_directions
 from eslam.slam.sdf_tracking import (
     SdfTracker,
     constrained_directions,
+    depth_noise_scale,
     field_derivatives,
     linearise,
     robust_weights,
@@ -333,3 +334,42 @@ def test_colour_term_needs_colour() -> None:
         linearise(Colourless(), points, TRUE_POSE, COLOUR, torch.zeros(50, 3))
     with pytest.raises(ValueError, match="colour_weight"):
         SdfTrackerConfig(colour_weight=-1.0)
+
+
+def test_depth_noise_weighting_divides_residuals_and_rows_by_the_noise(view) -> None:
+    """With z0 set, J^T W J and J^T W r are those of r_i / (z_i/z0)^2 and J_i / (z_i/z0)^2
+    (all Huber weights 1 here), while ``residual`` stays in metres for the quality figures."""
+    field = AnalyticField()
+    points_cam, _ = sdf_points(view, 500, torch.Generator().manual_seed(3))
+    pose = perturbed(0.004, 0.3, 3)
+    plain = SdfTrackerConfig(robust_scale=10.0)
+    weighted = linearise(
+        field, points_cam, pose, dataclasses.replace(plain, noise_reference_depth=1.5)
+    )
+    reference = linearise(field, points_cam, pose, plain)
+    sigma = (points_cam[:, 2] / 1.5).square()
+    assert torch.equal(sigma, depth_noise_scale(points_cam[:, 2], 1.5))
+    assert float(sigma.max() / sigma.min()) > 4  # the view spans near and far points
+    points = points_cam @ pose[:3, :3].T + pose[:3, 3]
+    sdf, gradient, _, _ = field_derivatives(field, points, with_rgb=False)
+    rows = (TRUNCATION * twist_jacobian(points, gradient)).double() * reference.valid[:, None]
+    scaled = rows / sigma.double()[:, None]
+    expected_h = scaled.T @ scaled
+    expected_g = scaled.T @ (TRUNCATION * sdf / sigma).double()
+    torch.testing.assert_close(weighted.hessian, expected_h, rtol=1e-5, atol=1e-9)
+    torch.testing.assert_close(weighted.gradient, expected_g, rtol=1e-5, atol=1e-9)
+    assert not torch.allclose(reference.hessian, expected_h, rtol=1e-2)
+    torch.testing.assert_close(weighted.residual, reference.residual)
+    assert torch.equal(depth_noise_scale(points_cam[:, 2], None), torch.ones(500))
+
+
+def test_depth_noise_weighting_converges_from_3cm_3deg(view) -> None:
+    config = SdfTrackerConfig(noise_reference_depth=2.0)
+    result = SdfTracker(config).track(
+        AnalyticField(), view, perturbed(0.03, 3.0, 0), torch.Generator().manual_seed(0)
+    )
+    error_t, error_r = pose_distance(result.pose, TRUE_POSE)
+    assert result.quality is not None and not result.quality.failed
+    assert float(error_t) < 0.003 and math.degrees(float(error_r)) < 0.2
+    with pytest.raises(ValueError, match="noise_reference_depth"):
+        SdfTrackerConfig(noise_reference_depth=0.0)
