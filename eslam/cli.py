@@ -380,7 +380,7 @@ def _non_negative_float(text: str) -> float:
 def _command_ate(args: argparse.Namespace) -> int:
     from eslam.errors import InputError
     from eslam.evaluate.report import titled_table
-    from eslam.evaluate.trajectory import TimedPoses, trajectory_ate
+    from eslam.evaluate.trajectory import TimedPoses, trajectory_ate, trajectory_rpe
     from eslam.io.run_dir import json_text
     from eslam.io.trajectory import read_trajectory
 
@@ -393,6 +393,10 @@ def _command_ate(args: argparse.Namespace) -> int:
             args.est, str(error), "check that both files cover the same frames, or --max-diff"
         ) from None
     metrics = {**result.as_dict(), "align": args.align, "max_diff_s": args.max_diff}
+    try:  # relative motions need no alignment; a pair needs two consecutive matched poses
+        metrics.update(trajectory_rpe(gt, est, 1, args.max_diff).as_dict())
+    except ValueError:
+        pass  # no consecutive finite pair: the ATE stands alone
     if args.json:
         print(json_text({**metrics, "gt": args.gt, "est": args.est}))
     else:
@@ -508,7 +512,7 @@ def _add_evaluation_commands(commands: argparse._SubParsersAction) -> None:
 
     ate = commands.add_parser(
         "ate",
-        help="absolute trajectory error between two trajectories (any system's)",
+        help="absolute trajectory error (and relative pose error) between two trajectories",
         description=(
             "ATE after Umeyama alignment of the estimate onto the ground truth: RMSE, mean, "
             "median, max (cm). GT and EST are TUM files (timestamp tx ty tz qx qy qz qw), "

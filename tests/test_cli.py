@@ -168,6 +168,7 @@ def test_ate_command_table_json_and_run_folders(
     report = json.loads(capsys.readouterr().out)
     assert report["pairs"] == 20 and report["ate_rmse_cm"] < 1e-9
     assert report["scale"] == pytest.approx(0.5) and report["align"] == "sim3"
+    assert report["rpe_pairs"] == 19 and report["rpe_translation_rmse_mm"] > 10  # 2x steps
     assert main(["ate", str(run), str(run), "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["ate_rmse_cm"] > 1.0  # se3 cannot scale
 

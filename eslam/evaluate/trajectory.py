@@ -257,6 +257,18 @@ def trajectory_ate(
     return absolute_trajectory_error(est, gt, with_scale)
 
 
+def trajectory_rpe(
+    ground_truth: TimedPoses, estimate: TimedPoses, delta: int = 1, max_difference: float = 0.01
+) -> RPEResult:
+    """RPE of two timestamped trajectories, as evo's ``evo_rpe tum GT EST --delta 1
+    --delta_unit f`` computes it: poses matched by :func:`associate_timestamps`, then
+    :func:`relative_pose_error` over pairs ``delta`` matched poses apart."""
+    est_index, gt_index = associate_timestamps(
+        estimate.timestamps, ground_truth.timestamps, max_difference
+    )
+    return relative_pose_error(estimate.poses[est_index], ground_truth.poses[gt_index], delta)
+
+
 def associate_timestamps(
     first: np.ndarray, second: np.ndarray, max_difference: float = 0.01
 ) -> tuple[np.ndarray, np.ndarray]:

@@ -8,7 +8,12 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from eslam.evaluate.trajectory import associate_timestamps, relative_pose_error
+from eslam.evaluate.trajectory import (
+    TimedPoses,
+    associate_timestamps,
+    relative_pose_error,
+    trajectory_rpe,
+)
 from eslam.io.trajectory import read_trajectory
 
 
@@ -125,3 +130,6 @@ def test_evo_reference_values(
     assert abs(result.translation_median - translation[1]) < 1e-6
     assert abs(result.rotation_rmse - rotation[0]) < 1e-6
     assert abs(result.rotation_median - rotation[1]) < 1e-6
+    assert (
+        trajectory_rpe(TimedPoses(gt_times, gt_poses), TimedPoses(est_times, est_poses)) == result
+    )
