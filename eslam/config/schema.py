@@ -348,10 +348,17 @@ class HybridTrackerConfig:
     render_iterations: int = 3
     """Rendering-tracker iterations after the SDF tracker converged (its other settings:
     ``tracking.render``)."""
+    lr_factor: float = 1.0
+    """Factor on ``tracking.render``'s learning rates for these iterations. Adam's first
+    step moves every pose parameter by about its learning rate whatever the gradient's
+    size, so after a converged SDF stage a smaller rate polishes instead of jumping
+    (docs/tracking.md)."""
 
     def __post_init__(self) -> None:
         if self.render_iterations < 1:
             raise ValueError(f"render_iterations must be >= 1, got {self.render_iterations}")
+        if not self.lr_factor > 0:
+            raise ValueError(f"lr_factor must be > 0, got {self.lr_factor}")
 
 
 TRACKING_METHODS = ("render", "sdf", "hybrid")

@@ -63,8 +63,12 @@ def _sdf_tracker(config: ESLAMConfig) -> SdfTracker:
 
 
 def _hybrid_tracker(config: ESLAMConfig) -> HybridTracker:
+    hybrid, render = config.tracking.hybrid, config.tracking.render
     render = dataclasses.replace(
-        config.tracking.render, iterations=config.tracking.hybrid.render_iterations
+        render,
+        iterations=hybrid.render_iterations,
+        lr_translation=render.lr_translation * hybrid.lr_factor,
+        lr_rotation=render.lr_rotation * hybrid.lr_factor,
     )
     settings = TrackingSettings(render, config.render, config.loss)
     return HybridTracker(_sdf_tracker(config), _renderer(config, settings))

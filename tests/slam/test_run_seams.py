@@ -244,3 +244,24 @@ def test_a_failed_frame_keeps_the_prediction_and_is_no_keyframe(
     )
     # no failed frame kept the far pose: every estimate stays near the ground truth
     assert result.metrics["ate_rmse_cm"] < 5.0
+
+
+def test_hybrid_lr_factor_scales_only_the_render_stage() -> None:
+    config = load_config(
+        None,
+        [
+            "tracking.method=hybrid",
+            "tracking.hybrid.lr_factor=0.2",
+            "tracking.render.lr_rotation=0.002",
+        ],
+    )
+    stage = make_tracker(config).render.settings.tracking
+    assert stage.iterations == config.tracking.hybrid.render_iterations
+    assert stage.lr_translation == pytest.approx(0.2 * config.tracking.render.lr_translation)
+    assert stage.lr_rotation == pytest.approx(0.0004)
+    plain = make_tracker(
+        dataclasses.replace(config, tracking=dataclasses.replace(config.tracking, method="render"))
+    )
+    assert plain.settings.tracking.lr_rotation == 0.002  # the render tracker keeps its own
+    with pytest.raises(ConfigError, match="lr_factor"):
+        load_config(None, ["tracking.hybrid.lr_factor=0"])
