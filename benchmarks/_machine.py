@@ -9,7 +9,9 @@ import os
 import platform
 import shlex
 import sys
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import torch
 
@@ -157,3 +159,21 @@ def command_line(script: str, argv: list[str] | None) -> str:
     path = Path(sys.argv[0]).resolve()
     shown = path.relative_to(REPO).as_posix() if path.is_relative_to(REPO) else sys.argv[0]
     return shlex.join(["python", shown, *sys.argv[1:]])
+
+
+def run_timing_benchmark(
+    script: str,
+    argv: list[str] | None,
+    args: argparse.Namespace,
+    run: Callable[[torch.device, int, int], Any],
+    report: Callable[..., str],
+) -> None:
+    """The ``main`` of a timing benchmark: ``run(device, warmup, repeats)`` between two
+    load-average readings, then ``report(results, device, args, command, loads)``
+    printed and appended to ``args.docs`` (unless ``--no-append``)."""
+    device = torch.device(args.device)
+    command = command_line(script, argv)
+    load_start = load_average()
+    results = run(device, args.warmup, args.repeats)
+    section = report(results, device, args, command, (load_start, load_average()))
+    publish(section, args.docs, args.no_append)

@@ -31,10 +31,8 @@ import torch
 from _machine import (
     add_timing_arguments,
     check_timing_arguments,
-    command_line,
-    load_average,
     machine_lines,
-    publish,
+    run_timing_benchmark,
 )
 from bench_core import SEED, Stats, build_field, synchronize, time_interleaved, workload
 
@@ -169,13 +167,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
 
 
 def main(argv: list[str] | None = None) -> None:
-    args = parse_args(argv)
-    device = torch.device(args.device)
-    command = command_line("benchmarks/bench_compile.py", argv)
-    load_start = load_average()
-    rows = run(device, args.warmup, args.repeats)
-    section = report(rows, device, args, command, (load_start, load_average()))
-    publish(section, args.docs, args.no_append)
+    run_timing_benchmark("benchmarks/bench_compile.py", argv, parse_args(argv), run, report)
 
 
 if __name__ == "__main__":
