@@ -78,6 +78,11 @@ class DataConfig:
     Tab. 1; eslam.data.depth_resolution). 1 = the depth as read."""
     camera: str | None = None
     """TUM only: fr1, fr2 or fr3 (intrinsics and distortion); null = from the folder name."""
+    register_colour: bool = True
+    """7-Scenes only: resample the colour image into the depth camera (its own focal length
+    and a 2.5 cm baseline; eslam.data.registration) so texture lies on the geometry;
+    false = the raw colour with the depth camera's intrinsics, tens of pixels off near
+    the border."""
     prefetch: int = 4
     """Frames read ahead on a background thread while the loop works (the same frames in
     the same order: results do not change); 0 = read each frame when the loop asks."""

@@ -19,9 +19,12 @@ Caveats of the data, handled here:
 - Ground truth comes from KinectFusion; its rotation blocks are orthonormal only to
   about 4e-4. Each is replaced by the nearest rotation (SVD) after checking that it is
   close to one (:data:`ROTATION_TOLERANCE`), so a grossly broken pose is still an error.
-- Colour and depth are NOT registered (separate cameras a few centimetres apart,
-  uncalibrated): the depth camera's K is used for both and colour is off by a few
-  pixels. No correction is applied; expect slightly blurred colour in the map.
+- Colour and depth are NOT registered: two cameras about 2.5 cm apart with different
+  focal lengths (585 depth, about 525 colour). Read with the depth camera's K, colour
+  lies up to ~30 px off the geometry near the border. With ``data.register_colour``
+  (the default) each colour image is resampled into the depth camera
+  (:func:`eslam.data.registration.register_colour`, :data:`SEVENSCENES_COLOUR_CAMERA`,
+  fitted by ``benchmarks/colour_registration.py``).
 
 Frames are ordered by their number (gaps allowed); timestamps are the frame numbers.
 """
@@ -36,6 +39,7 @@ import torch
 
 from eslam.config import DataConfig
 from eslam.data.base import FileSequence, FrameReading, require_dir
+from eslam.data.registration import ColourCamera, register_colour
 from eslam.data.scannet import fitting_intrinsics, image_size
 from eslam.data.transform import transform_from_options
 from eslam.errors import InputError
@@ -51,6 +55,14 @@ SEVENSCENES_INVALID_DEPTH = 65535
 
 SEVENSCENES_INTRINSICS = Intrinsics(640, 480, 585.0, 585.0, 320.0, 240.0)
 """The depth camera published on the 7-Scenes page (fx = fy = 585, cx = 320, cy = 240)."""
+
+SEVENSCENES_COLOUR_CAMERA = ColourCamera(
+    fx=525.0, fy=525.0, cx=320.0, cy=239.0, centre=(0.025, 0.0, 0.0)
+)
+"""The Kinect v1 colour camera relative to the depth camera of 7-Scenes: the usual
+525-pixel focal length of 7-Scenes colour, its centre 2.5 cm along +x. The focal
+length, row and baseline are the edge-alignment fit of
+``benchmarks/colour_registration.py`` on redkitchen (docs/data.md)."""
 
 ROTATION_TOLERANCE = 1e-2
 """Largest |R^T R - I| entry (and |det R - 1|) of a raw 7-Scenes rotation before it is
@@ -136,11 +148,12 @@ class SevenScenesSequence(FileSequence):
     Args:
         root: the folder of ``frame-XXXXXX.*`` files (a ``seq-XX`` folder).
         options: the ``data`` config section; depth_scale (default 1000), resize and
-            crop (default: none) apply.
+            crop (default: none) and register_colour (default: on) apply.
 
     Raises:
         InputError: missing folder, a frame without its colour, depth or pose file, a
-            bad pose, bad intrinsics file, or images of the wrong size.
+            bad pose, bad intrinsics file, images of the wrong size, or colour
+            registration asked for images that are not 640x480.
     """
 
     def __init__(self, root: str | Path, options: DataConfig | None = None) -> None:
@@ -163,6 +176,13 @@ class SevenScenesSequence(FileSequence):
         self._colour_paths = [files["color"][n] for n in self.numbers]
         self._depth_paths = [files["depth"][n] for n in self.numbers]
         self.raw_intrinsics = find_intrinsics(self.root, image_size(self._depth_paths[0]))
+        if options.register_colour and self.raw_intrinsics.size != SEVENSCENES_INTRINSICS.size:
+            raise InputError(
+                self._depth_paths[0],
+                f"is {self.raw_intrinsics.width}x{self.raw_intrinsics.height}; 7-Scenes colour "
+                "registration knows the 640x480 Kinect v1 only",
+                "set data.register_colour=false to use the colour as it is",
+            )
         self.depth_scale = options.depth_scale or SEVENSCENES_DEPTH_SCALE
         self.transform = transform_from_options(options.resize, options.crop)
         self.reading = FrameReading(
@@ -170,6 +190,11 @@ class SevenScenesSequence(FileSequence):
             self.depth_scale,
             self.transform,
             invalid_depth=SEVENSCENES_INVALID_DEPTH,
+            prepare=self._registered if options.register_colour else None,
         )
         self.intrinsics = self.reading.intrinsics
         self._poses = np.stack([read_sevenscenes_pose(files["pose"][n]) for n in self.numbers])
+
+    def _registered(self, rgb: np.ndarray, depth: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(colour resampled into the depth camera, depth): ``FrameReading.prepare``."""
+        return register_colour(rgb, depth, self.raw_intrinsics, SEVENSCENES_COLOUR_CAMERA), depth
