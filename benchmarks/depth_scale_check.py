@@ -23,55 +23,41 @@ import sys
 from pathlib import Path
 
 import numpy as np
-import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _machine import DEFAULT_DOCS, command_line, publish
 
 from eslam.config import load_config
 from eslam.data import open_sequence
-from eslam.geometry.camera import backproject_depth, project_points
+from eslam.evaluate.depth_consistency import depth_residuals
 from eslam.types import Frame
 
 
 def pair_residuals(
     source: Frame, target: Frame, scales: np.ndarray, inlier_m: float, every: int
 ) -> tuple[np.ndarray, float]:
-    """Median |depth residual| (m) of ``source`` seen from ``target``, per scale.
+    """Median |depth residual| (m) of ``source`` seen from ``target``, per scale
+    (:func:`eslam.evaluate.depth_consistency.depth_residuals` with the ground truth).
 
     Returns:
         (S,) medians over the source pixels that are inliers at s = 1, and the
         baseline (m) between the two ground-truth camera centres.
     """
-    depth = torch.from_numpy(source.depth).double()
-    points = backproject_depth(depth, source.intrinsics)[::every, ::every].reshape(-1, 3)
-    points = points[depth[::every, ::every].reshape(-1) > 0]
-    relative = torch.from_numpy(np.linalg.inv(target.pose_gt) @ source.pose_gt)
-    target_depth = torch.from_numpy(target.depth).double()
-    height, width = target_depth.shape
-    identity = torch.eye(4, dtype=torch.float64)
 
-    def residual(scale: float) -> torch.Tensor:
-        moved = scale * points @ relative[:3, :3].T + relative[:3, 3]
-        uv, z = project_points(moved, target.intrinsics, identity)
-        u, v = uv[:, 0].round().long(), uv[:, 1].round().long()
-        inside = (z > 0.1) & (u >= 0) & (u < width) & (v >= 0) & (v < height)
-        observed = torch.zeros_like(z)
-        observed[inside] = target_depth[v[inside], u[inside]] * scale
-        result = torch.full_like(z, float("nan"))
-        valid = inside & (observed > 0)
-        result[valid] = z[valid] - observed[valid]
-        return result
+    def residual(scale: float) -> np.ndarray:
+        return depth_residuals(
+            source.depth, target.depth, source.intrinsics,
+            source.pose_gt, target.pose_gt, every, scale,
+        )  # fmt: skip
 
-    at_one = residual(1.0)
-    inliers = at_one.abs() < inlier_m
+    inliers = np.abs(np.nan_to_num(residual(1.0), nan=np.inf)) < inlier_m
     medians = []
     for scale in scales:
         values = residual(float(scale))[inliers]
-        values = values[torch.isfinite(values)]
-        medians.append(float(values.abs().median()) if values.numel() else float("nan"))
-    baseline = float(relative[:3, 3].norm())
-    return np.array(medians), baseline
+        values = values[np.isfinite(values)]
+        medians.append(float(np.median(np.abs(values))) if values.size else float("nan"))
+    relative = np.linalg.inv(target.pose_gt) @ source.pose_gt
+    return np.array(medians), float(np.linalg.norm(relative[:3, 3]))
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:

@@ -1,0 +1,140 @@
+"""Which trajectory agrees better with the depth images: a run's estimate or the ground truth?
+
+ATE measures an estimate against a reference and so counts the reference's own errors
+as the estimate's. This reads a run's ``trajectory.txt`` and the sequence's ground
+truth and scores both on the data itself (:mod:`eslam.evaluate.depth_consistency`):
+for frame pairs (i, i + gap), the median |depth residual| of frame i's points moved
+into frame i + gap by each trajectory, over the same pixels for both. Lower is more
+consistent. It then lists the single-frame steps where the ground truth disagrees with
+the depth most, and the ATE the ground truth itself would score against a copy of it
+with its worst step replaced by the estimate's (the least ATE a trajectory that follows
+the depth at that step can reach, were it perfect elsewhere). No SLAM runs here.
+
+    python benchmarks/trajectory_consistency.py --config configs/sevenscenes/redkitchen.yaml \\
+        --data ../shared/data/7scenes-redkitchen --run RUN_FOLDER
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _machine import DEFAULT_DOCS, command_line, publish
+
+from eslam.config import load_config
+from eslam.data import open_sequence
+from eslam.evaluate.depth_consistency import pair_consistency
+from eslam.evaluate.trajectory import absolute_trajectory_error
+from eslam.io.trajectory import read_trajectory
+
+
+def parse_args(argv: list[str] | None) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--config", type=Path, required=True)
+    parser.add_argument("--data", type=Path, required=True, help="the sequence folder")
+    parser.add_argument("--run", type=Path, required=True, help="a run folder or trajectory")
+    parser.add_argument("--gaps", type=int, nargs="+", default=[10, 60])
+    parser.add_argument("--step", type=int, default=10, help="frames between pairs")
+    parser.add_argument("--every", type=int, default=4, help="pixel subsampling")
+    parser.add_argument("--inlier-cm", type=float, default=5.0)
+    parser.add_argument("--worst", type=int, default=3, help="single steps listed")
+    parser.add_argument("--docs", type=Path, default=DEFAULT_DOCS)
+    parser.add_argument("--no-append", action="store_true")
+    parser.add_argument("--note", default="")
+    return parser.parse_args(argv)
+
+
+def replaced_step(poses: np.ndarray, other: np.ndarray, index: int) -> np.ndarray:
+    """``poses`` with the relative motion from ``index - 1`` to ``index`` taken from
+    ``other`` and every later pose moved with it (the motions after are kept)."""
+    moved = poses.copy()
+    step = np.linalg.inv(other[index - 1]) @ other[index]
+    correction = poses[index - 1] @ step @ np.linalg.inv(poses[index])
+    moved[index:] = correction @ poses[index:]
+    return moved
+
+
+def main(argv: list[str] | None = None) -> None:
+    args = parse_args(argv)
+    config = load_config(args.config, [f"data.path={args.data}", "data.register_colour=false"])
+    sequence = open_sequence(config.data)
+    times, estimate = read_trajectory(args.run)
+    ground_truth = sequence.gt_poses()
+    count = len(estimate)
+    if ground_truth is None or count > len(sequence):
+        raise SystemExit(f"{args.run}: needs a sequence with ground truth and >= {count} frames")
+    if not np.allclose(times, sequence.timestamps()[:count]):
+        raise SystemExit(f"{args.run}: its timestamps are not the sequence's first {count}")
+    ground_truth = ground_truth[:count]
+    depths = [sequence[i].depth for i in range(count)]
+    intrinsics = sequence.intrinsics
+    inlier = args.inlier_cm / 100
+
+    def medians(i: int, j: int) -> np.ndarray:
+        poses = [(ground_truth[i], ground_truth[j]), (estimate[i], estimate[j])]
+        return pair_consistency(depths[i], depths[j], intrinsics, poses, inlier, args.every).medians
+
+    rows = []
+    for gap in args.gaps:
+        pairs = np.array([medians(i, i + gap) for i in range(0, count - gap, args.step)])
+        pairs = pairs[np.isfinite(pairs).all(axis=1)]
+        better = int((pairs[:, 1] < pairs[:, 0]).sum())
+        rows.append(
+            f"| {gap} | {len(pairs)} | {1000 * np.median(pairs[:, 0]):.2f} "
+            f"| {1000 * np.median(pairs[:, 1]):.2f} | {better} of {len(pairs)} |"
+        )
+    steps = np.array([medians(i - 1, i) for i in range(1, count)])
+    worst = np.argsort(-(steps[:, 0] - steps[:, 1]))[: args.worst] + 1
+    step_rows = []
+    for index in worst:
+        gt_step = np.linalg.inv(ground_truth[index - 1]) @ ground_truth[index]
+        est_step = np.linalg.inv(estimate[index - 1]) @ estimate[index]
+        step_rows.append(
+            f"| {index - 1} -> {index} | {1000 * np.linalg.norm(gt_step[:3, 3]):.1f} "
+            f"| {1000 * np.linalg.norm(est_step[:3, 3]):.1f} "
+            f"| {1000 * steps[index - 1, 0]:.2f} | {1000 * steps[index - 1, 1]:.2f} |"
+        )
+    spliced = replaced_step(ground_truth, estimate, int(worst[0]))
+    floor = absolute_trajectory_error(spliced[:, :3, 3], ground_truth[:, :3, 3])
+    estimate_ate = absolute_trajectory_error(estimate[:, :3, 3], ground_truth[:, :3, 3])
+    now = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    lines = [
+        f"## trajectory_consistency, {now}",
+        "",
+        f"- command: `{command_line('benchmarks/trajectory_consistency.py', argv)}`",
+        f"- {count} frames; pairs every {args.step} frames; every {args.every}th pixel; "
+        f"pixels within {args.inlier_cm:g} cm under both trajectories; figures: median "
+        "over pairs of each pair's median |depth residual| (lower = more consistent)",
+    ]
+    if args.note:
+        lines.append(f"- note: {args.note}")
+    lines += [
+        "",
+        "| gap (frames) | pairs | ground truth (mm) | estimate (mm) "
+        "| pairs where the estimate agrees better |",
+        "|---:|---:|---:|---:|---:|",
+        *rows,
+        "",
+        "Single steps where the ground truth disagrees with the depth most (against the estimate):",
+        "",
+        "| step | ground-truth motion (mm) | estimated motion (mm) | ground truth (mm) "
+        "| estimate (mm) |",
+        "|---|---:|---:|---:|---:|",
+        *step_rows,
+        "",
+        f"- ATE RMSE of the estimate: {100 * estimate_ate.rmse:.2f} cm. The ground truth with "
+        f"its step {worst[0] - 1} -> {worst[0]} replaced by the estimate's scores "
+        f"{100 * floor.rmse:.2f} cm against the ground truth: what a trajectory equal to "
+        "the ground truth everywhere else but moving as the estimate does at that step scores.",
+        "",
+    ]
+    publish("\n".join(lines), args.docs, args.no_append)
+
+
+if __name__ == "__main__":
+    main()
