@@ -101,6 +101,9 @@ def main(argv: list[str] | None = None) -> None:
         )
     spliced = replaced_step(ground_truth, estimate, int(worst[0]))
     floor = absolute_trajectory_error(spliced[:, :3, 3], ground_truth[:, :3, 3])
+    floor_scale = absolute_trajectory_error(
+        spliced[:, :3, 3], ground_truth[:, :3, 3], with_scale=True
+    ).alignment.scale
     estimate_ate = absolute_trajectory_error(estimate[:, :3, 3], ground_truth[:, :3, 3])
     now = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
     lines = [
@@ -129,8 +132,9 @@ def main(argv: list[str] | None = None) -> None:
         "",
         f"- ATE RMSE of the estimate: {100 * estimate_ate.rmse:.2f} cm. The ground truth with "
         f"its step {worst[0] - 1} -> {worst[0]} replaced by the estimate's scores "
-        f"{100 * floor.rmse:.2f} cm against the ground truth: what a trajectory equal to "
-        "the ground truth everywhere else but moving as the estimate does at that step scores.",
+        f"{100 * floor.rmse:.2f} cm against the ground truth (Sim(3) scale "
+        f"{floor_scale:.4f}): what a trajectory equal to the ground truth everywhere else "
+        "but moving as the estimate does at that step scores.",
         "",
     ]
     publish("\n".join(lines), args.docs, args.no_append)
