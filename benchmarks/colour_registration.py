@@ -38,7 +38,7 @@ def fit(
     intrinsics: Intrinsics,
     start: ColourCamera,
     rounds: int,
-) -> tuple[ColourCamera, float]:
+) -> ColourCamera:
     """Coordinate search over (focal, cy, centre x) from ``start``; steps halve each round."""
     steps = {"focal": 10.0, "cy": 4.0, "baseline": 0.01}
     best = start
@@ -57,7 +57,7 @@ def fit(
                 if score > best_score:
                     best, best_score = trial, score
         steps = {name: step / 2 for name, step in steps.items()}
-    return best, best_score
+    return best
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -77,12 +77,12 @@ def main(argv: list[str] | None = None) -> None:
     for index in range(0, len(sequence), args.every):
         frame = sequence[index]
         frames.append(edge_view(frame.rgb, frame.depth, args.jump_mm / 1e3))
-    raw = ColourCamera(intrinsics.fx, intrinsics.fy, intrinsics.cx, intrinsics.cy, (0.0, 0.0, 0.0))
+    raw = ColourCamera.of_depth_camera(intrinsics)
     rows = [
         ("raw colour (depth camera's K for both)", raw),
         ("eslam's 7-Scenes colour camera", SEVENSCENES_COLOUR_CAMERA),
     ]
-    fitted, _ = fit(frames, intrinsics, SEVENSCENES_COLOUR_CAMERA, args.rounds)
+    fitted = fit(frames, intrinsics, SEVENSCENES_COLOUR_CAMERA, args.rounds)
     rows.append(("fit from eslam's", fitted))
     now = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
     lines = [

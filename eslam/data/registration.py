@@ -49,6 +49,12 @@ class ColourCamera:
     cy: float
     centre: tuple[float, float, float]
 
+    @classmethod
+    def of_depth_camera(cls, depth_camera: Intrinsics) -> ColourCamera:
+        """The depth camera itself: colour read as if registered (no resampling needed)."""
+        k = depth_camera
+        return cls(k.fx, k.fy, k.cx, k.cy, (0.0, 0.0, 0.0))
+
 
 def colour_pixel_of_depth_pixel(
     depth: np.ndarray, depth_camera: Intrinsics, colour_camera: ColourCamera

@@ -59,9 +59,8 @@ def _plane_images(z: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 def test_same_camera_is_the_identity() -> None:
     rgb = np.random.default_rng(0).integers(0, 256, (120, 160, 3), dtype=np.uint8)
     depth = np.full((120, 160), 1.7, np.float32)
-    k = DEPTH_CAMERA
-    same = ColourCamera(k.fx, k.fy, k.cx, k.cy, (0.0, 0.0, 0.0))
-    np.testing.assert_array_equal(register_colour(rgb, depth, k, same), rgb)
+    same = ColourCamera.of_depth_camera(DEPTH_CAMERA)
+    np.testing.assert_array_equal(register_colour(rgb, depth, DEPTH_CAMERA, same), rgb)
 
 
 def test_parallax_shrinks_with_depth() -> None:
@@ -114,7 +113,7 @@ def test_edge_alignment_prefers_the_true_camera() -> None:
     rgb = np.where(box[..., None], 220, 40).astype(np.uint8).repeat(3, axis=-1)
     views = [edge_view(rgb, depth)]
     k = DEPTH_CAMERA
-    raw = ColourCamera(k.fx, k.fy, k.cx, k.cy, (0.0, 0.0, 0.0))
+    raw = ColourCamera.of_depth_camera(k)
     assert alignment_score(views, k, COLOUR_CAMERA) > 1.5 * alignment_score(views, k, raw)
 
 
@@ -136,7 +135,7 @@ def test_real_redkitchen_colour_is_registered(real_data: Path) -> None:
     raw = SevenScenesSequence(root, DataConfig(register_colour=False))
     registered = SevenScenesSequence(root)
     k = SEVENSCENES_INTRINSICS
-    identity = ColourCamera(k.fx, k.fy, k.cx, k.cy, (0.0, 0.0, 0.0))
+    identity = ColourCamera.of_depth_camera(k)
     views = [edge_view(raw[i].rgb, raw[i].depth) for i in (0, 169, 350)]
     # Measured with benchmarks/colour_registration.py: 0.150 against 0.075 (8 frames).
     assert alignment_score(views, k, SEVENSCENES_COLOUR_CAMERA) > 1.6 * alignment_score(
