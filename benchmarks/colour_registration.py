@@ -23,12 +23,20 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 
+import numpy as np
+
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _machine import DEFAULT_DOCS, command_line, publish
 
 from eslam.config import load_config
 from eslam.data import open_sequence
-from eslam.data.registration import ColourCamera, EdgeView, alignment_score, edge_view
+from eslam.data.registration import (
+    ColourCamera,
+    EdgeView,
+    alignment_score,
+    colour_pixel_of_depth_pixel,
+    edge_view,
+)
 from eslam.data.sevenscenes import SEVENSCENES_COLOUR_CAMERA
 from eslam.types import Intrinsics
 
@@ -102,6 +110,18 @@ def main(argv: list[str] | None = None) -> None:
             f"| {label} | {camera.fx:.1f} | {camera.cy:.1f} | "
             f"{100 * camera.centre[0]:.2f} | {score:.4f} |"
         )
+    shifts = []
+    for view in frames:
+        u_c, v_c = colour_pixel_of_depth_pixel(view.depth, intrinsics, SEVENSCENES_COLOUR_CAMERA)
+        v, u = np.mgrid[0 : view.depth.shape[0], 0 : view.depth.shape[1]]
+        shifts.append(np.hypot(u_c - u, v_c - v)[view.depth > 0])
+    shift = np.concatenate(shifts)
+    lines += [
+        "",
+        f"- where eslam's colour camera finds the colour of a depth pixel, against the raw "
+        f"reading (same pixel): median {np.median(shift):.1f} px, largest {shift.max():.1f} px "
+        "(pixels with depth)",
+    ]
     publish("\n".join(lines) + "\n", args.docs, args.no_append)
 
 

@@ -21,8 +21,9 @@ Caveats of the data, handled here:
   close to one (:data:`ROTATION_TOLERANCE`), so a grossly broken pose is still an error.
 - Colour and depth are NOT registered: two cameras about 2.5 cm apart with different
   focal lengths (585 depth, about 525 colour). Read with the depth camera's K, colour
-  lies up to ~30 px off the geometry near the border. With ``data.register_colour``
-  (the default) each colour image is resampled into the depth camera
+  lies tens of pixels off the geometry (redkitchen: median 22, largest 55 px). With
+  ``data.register_colour`` (the default) each colour image is resampled into the depth
+  camera
   (:func:`eslam.data.registration.register_colour`, :data:`SEVENSCENES_COLOUR_CAMERA`,
   fitted by ``benchmarks/colour_registration.py``).
 
