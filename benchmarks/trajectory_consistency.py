@@ -10,7 +10,9 @@ the depth most; the translation RPE of the steps by their place in the mapping c
 mapped frame's pose is refined by mapping as well); and the ATE that a copy of the
 ground truth with its worst step replaced by the estimate's scores against the ground
 truth (what a trajectory perfect elsewhere but following the depth at that step
-scores). No SLAM runs here.
+scores); and, per ``--segment`` frames, where the ATE builds up, how far each
+trajectory moves there and how well each agrees with the depth there. No SLAM runs
+here.
 
     python benchmarks/trajectory_consistency.py --config configs/sevenscenes/redkitchen.yaml \\
         --data ../shared/data/7scenes-redkitchen --run RUN_FOLDER
@@ -45,6 +47,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--every", type=int, default=4, help="pixel subsampling")
     parser.add_argument("--inlier-cm", type=float, default=5.0)
     parser.add_argument("--worst", type=int, default=3, help="single steps listed")
+    parser.add_argument("--segment", type=int, default=50, help="frames per segment row")
     parser.add_argument("--docs", type=Path, default=DEFAULT_DOCS)
     parser.add_argument("--no-append", action="store_true")
     parser.add_argument("--note", default="")
@@ -59,6 +62,42 @@ def replaced_step(poses: np.ndarray, other: np.ndarray, index: int) -> np.ndarra
     correction = poses[index - 1] @ step @ np.linalg.inv(poses[index])
     moved[index:] = correction @ poses[index:]
     return moved
+
+
+def net_motion(poses: np.ndarray, hop: int) -> float:
+    """Sum of the camera's displacements |t(i + hop) - t(i)| over hops of ``hop`` frames
+    (metres): how far it travels, with the per-frame jitter averaged out."""
+    positions = poses[::hop, :3, 3]
+    return float(np.linalg.norm(np.diff(positions, axis=0), axis=1).sum())
+
+
+def segment_rows(
+    estimate: np.ndarray,
+    ground_truth: np.ndarray,
+    errors: np.ndarray,
+    pair_medians: dict[int, np.ndarray],
+    length: int,
+    hop: int,
+) -> list[str]:
+    """One markdown row per ``length`` frames: the ATE errors' RMS there (cm, from the
+    whole trajectory's alignment), how far each trajectory travels (:func:`net_motion`),
+    and the median depth residual of the pairs starting there (``pair_medians``: start
+    frame -> [ground truth, estimate] metres)."""
+    rows = []
+    for start in range(0, len(estimate) - 1, length):
+        end = min(start + length, len(estimate) - 1)
+        span = slice(start, end + 1)
+        truth_motion = net_motion(ground_truth[span], hop)
+        estimate_motion = net_motion(estimate[span], hop)
+        inside = [m for i, m in pair_medians.items() if start <= i < end]
+        residuals = np.median(np.stack(inside), axis=0) if inside else np.full(2, np.nan)
+        rows.append(
+            f"| {start}-{end} | {100 * np.sqrt(np.mean(errors[span] ** 2)):.2f} "
+            f"| {100 * truth_motion:.1f} | {100 * estimate_motion:.1f} "
+            f"| {estimate_motion / truth_motion:.3f} "
+            f"| {1000 * residuals[0]:.2f} | {1000 * residuals[1]:.2f} |"
+        )
+    return rows
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -82,9 +121,12 @@ def main(argv: list[str] | None = None) -> None:
         return pair_consistency(depths[i], depths[j], intrinsics, poses, inlier, args.every).medians
 
     rows = []
+    first_gap_pairs: dict[int, np.ndarray] = {}
     for gap in args.gaps:
-        pairs = np.array([medians(i, i + gap) for i in range(0, count - gap, args.step)])
-        pairs = pairs[np.isfinite(pairs).all(axis=1)]
+        by_start = {i: medians(i, i + gap) for i in range(0, count - gap, args.step)}
+        by_start = {i: m for i, m in by_start.items() if np.isfinite(m).all()}
+        first_gap_pairs = first_gap_pairs or by_start
+        pairs = np.array(list(by_start.values()))
         better = int((pairs[:, 1] < pairs[:, 0]).sum())
         rows.append(
             f"| {gap} | {len(pairs)} | {1000 * np.median(pairs[:, 0]):.2f} "
@@ -123,6 +165,10 @@ def main(argv: list[str] | None = None) -> None:
         spliced[:, :3, 3], ground_truth[:, :3, 3], with_scale=True
     ).alignment.scale
     estimate_ate = absolute_trajectory_error(estimate[:, :3, 3], ground_truth[:, :3, 3])
+    hop = args.gaps[0]
+    segments = segment_rows(
+        estimate, ground_truth, estimate_ate.errors, first_gap_pairs, args.segment, hop
+    )
     now = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
     lines = [
         f"## trajectory_consistency, {now}",
@@ -160,6 +206,16 @@ def main(argv: list[str] | None = None) -> None:
         f"{100 * floor.rmse:.2f} cm against the ground truth (Sim(3) scale "
         f"{floor_scale:.4f}): what a trajectory equal to the ground truth everywhere else "
         "but moving as the estimate does at that step scores.",
+        "",
+        f"Where the ATE builds up, by {args.segment} frames: RMS of the ATE errors there (the "
+        f"whole run's alignment), how far each trajectory moves (sum of {hop}-frame "
+        f"displacements), and the median depth residual of the {hop}-frame pairs starting "
+        "there:",
+        "",
+        "| frames | ATE errors RMS (cm) | ground-truth motion (cm) | estimated motion (cm) "
+        "| estimate / ground truth | ground truth (mm) | estimate (mm) |",
+        "|---|---:|---:|---:|---:|---:|---:|",
+        *segments,
         "",
     ]
     publish("\n".join(lines), args.docs, args.no_append)

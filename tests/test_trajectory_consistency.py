@@ -71,3 +71,20 @@ def test_reports_the_injected_jump(script, tmp_path: Path, capsys) -> None:
     gap_six = next(line for line in out.splitlines() if line.startswith("| 6 |"))
     better, pairs = gap_six.split("|")[5].strip().split(" of ")
     assert better == pairs  # every pair across the jump favours the estimate
+
+
+def test_segment_rows_locate_where_the_estimate_moves_too_far(script) -> None:
+    frames = 21
+    truth = np.tile(np.eye(4), (frames, 1, 1))
+    truth[:, 0, 3] = 0.01 * np.arange(frames)  # 1 cm per frame along x
+    estimate = truth.copy()
+    estimate[10:, 0, 3] = 0.1 + 0.012 * np.arange(frames - 10)  # 20 % more from frame 10
+    errors = np.linalg.norm(estimate[:, :3, 3] - truth[:, :3, 3], axis=1)
+    medians = {0: np.array([0.004, 0.005]), 12: np.array([0.006, 0.003])}
+    rows = script.segment_rows(estimate, truth, errors, medians, length=10, hop=2)
+    cells = [[c.strip() for c in row.strip("|").split("|")] for row in rows]
+    assert [c[0] for c in cells] == ["0-10", "10-20"]
+    assert cells[0][1] == "0.00" and float(cells[1][1]) > 0.5
+    assert cells[0][4] == "1.000" and cells[1][4] == "1.200"
+    assert cells[0][2] == "10.0" and cells[1][3] == "12.0"
+    assert cells[0][5:] == ["4.00", "5.00"] and cells[1][5:] == ["6.00", "3.00"]
