@@ -71,6 +71,11 @@ def test_reports_the_injected_jump(script, tmp_path: Path, capsys) -> None:
     gap_six = next(line for line in out.splitlines() if line.startswith("| 6 |"))
     better, pairs = gap_six.split("|")[5].strip().split(" of ")
     assert better == pairs  # every pair across the jump favours the estimate
+    # The ATE errors by place in the mapping cycle (12 frames, 3 per place) make up the ATE.
+    cycle = out.split("i mod every |")[1].split("\n\n")[0].splitlines()[2:]
+    by_place = np.array([float(row.strip("|").split("|")[4]) for row in cycle])
+    assert len(by_place) == 4
+    assert np.sqrt(np.mean(by_place**2)) == pytest.approx(float(estimate_ate), abs=0.01)
 
 
 def test_segment_rows_locate_where_the_estimate_moves_too_far(script) -> None:
