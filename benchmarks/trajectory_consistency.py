@@ -125,7 +125,8 @@ def main(argv: list[str] | None = None) -> None:
     for gap in args.gaps:
         by_start = {i: medians(i, i + gap) for i in range(0, count - gap, args.step)}
         by_start = {i: m for i, m in by_start.items() if np.isfinite(m).all()}
-        first_gap_pairs = first_gap_pairs or by_start
+        if gap == args.gaps[0]:
+            first_gap_pairs = by_start
         pairs = np.array(list(by_start.values()))
         better = int((pairs[:, 1] < pairs[:, 0]).sum())
         rows.append(
