@@ -3,13 +3,13 @@
 from __future__ import annotations
 
 import dataclasses
-import importlib.util
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from eslam.synthetic import SynthConfig, generate_sequence
+from eslam.testing.scripts import load_script
 
 SCRIPT = Path(__file__).resolve().parents[1] / "benchmarks" / "depth_scale_check.py"
 GAP = 30
@@ -17,10 +17,7 @@ GAP = 30
 
 @pytest.fixture(scope="module")
 def check():
-    spec = importlib.util.spec_from_file_location("depth_scale_check", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_script(SCRIPT)
 
 
 @pytest.fixture(scope="module")

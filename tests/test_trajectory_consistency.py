@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import dataclasses
-import importlib.util
 from pathlib import Path
 
 import numpy as np
@@ -12,6 +11,7 @@ import pytest
 from eslam.io.trajectory import write_tum_trajectory
 from eslam.synthetic import SynthConfig, generate_sequence
 from eslam.testing import write_sevenscenes_sequence
+from eslam.testing.scripts import load_script
 
 SCRIPT = Path(__file__).resolve().parents[1] / "benchmarks" / "trajectory_consistency.py"
 CONFIG = Path(__file__).resolve().parents[1] / "configs" / "sevenscenes" / "redkitchen.yaml"
@@ -20,10 +20,7 @@ JUMP_AT = 5
 
 @pytest.fixture(scope="module")
 def script():
-    spec = importlib.util.spec_from_file_location("trajectory_consistency", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_script(SCRIPT)
 
 
 def _jumped(poses: np.ndarray, at: int, metres: float) -> np.ndarray:
