@@ -9,7 +9,9 @@ For a ray with measured depth D and a sample at z with predicted TSDF s (units o
 - depth: (D_hat - D)^2 per ray; colour: (C_hat - C)^2 per ray and channel.
 
 Tracking and mapping differ only in the weights they pass and in tracking's outlier
-rejection. Everything is differentiable and free of host synchronisation.
+rejection. Optional per-ray weights (mapping's depth-noise model,
+:func:`depth_noise_weights`) turn the four depth-derived terms into weighted means.
+Everything is differentiable and free of host synchronisation.
 """
 
 from __future__ import annotations
@@ -30,33 +32,75 @@ class SdfTerms(NamedTuple):
     trunc_tail: torch.Tensor
 
 
-def masked_mean(values: torch.Tensor, mask: torch.Tensor, reduction: str) -> torch.Tensor:
+def depth_noise_scale(depth: torch.Tensor, reference: float | None) -> torch.Tensor:
+    """sigma(z) / sigma(z0) = (z / z0)^2 for depths z (metres), elementwise: the standard
+    deviation of structured-light and stereo depth grows with the square of the distance
+    (Khoshelham and Elberink 2012, Kinect v1: sigma(z) ~ 1.4 mm z^2 / m^2; the same law
+    for disparity-based sensors), so a residual divided by it is in units of the noise
+    at z0. Ones when ``reference`` is None (every depth alike)."""
+    if reference is None:
+        return torch.ones_like(depth)
+    return (depth / reference).square()
+
+
+def depth_noise_weights(depth: torch.Tensor) -> torch.Tensor:
+    """Relative inverse-variance weights w = D^-4 (per square metre squared) of squared
+    depth residuals, for measured depths D (N,) in metres; 0 where D <= 0 (no depth).
+
+    Depth noise grows as sigma(D) ~ D^2 (:func:`depth_noise_scale`), so the inverse
+    variance goes as D^-4. The weights enter weighted means (:func:`masked_mean`,
+    :func:`compute_losses`), where any common factor (a reference depth z0, the sensor's
+    noise at 1 m) cancels: only the balance between near and far rays changes.
+    """
+    safe = depth.clamp(min=1e-6)
+    return torch.where(depth > 0, safe.pow(-4), torch.zeros_like(depth))
+
+
+def masked_mean(
+    values: torch.Tensor,
+    mask: torch.Tensor,
+    reduction: str,
+    ray_weights: torch.Tensor | None = None,
+) -> torch.Tensor:
     """Mean of ``values`` over the samples selected by ``mask``; 0 when none is selected.
 
     "points" (release): sum_{r,i} m_ri v_ri / sum_{r,i} m_ri.
     "per_ray" (paper): per ray mean_r = sum_i m_ri v_ri / sum_i m_ri over the rays with at
     least one selected sample, then the mean of mean_r over those rays.
+    With ``ray_weights`` w_r both become weighted means: sum w_r m_ri v_ri / sum w_r m_ri
+    and sum_r w_r mean_r / sum_r w_r over the rays with a selected sample (all w_r = 1
+    gives the unweighted means).
 
     Args:
         values: (N, S).
         mask: (N, S) bool.
         reduction: "per_ray" or "points".
+        ray_weights: optional (N,) non-negative weights, one per ray.
 
     Returns:
         Scalar tensor.
 
     Example:
         values [[1, 3], [5, 0]], mask [[T, T], [T, F]]: points (1+3+5)/3 = 3,
-        per_ray (2 + 5) / 2 = 3.5.
+        per_ray (2 + 5) / 2 = 3.5; with ray weights [1, 3]: points (1+3+15)/5 = 3.8,
+        per_ray (2 + 15) / 4 = 4.25.
     """
     selected = torch.where(mask, values, torch.zeros_like(values))
     counts = mask.sum(dim=-1).to(values.dtype)
     if reduction == "points":
-        return selected.sum() / counts.sum().clamp(min=1.0)
+        if ray_weights is None:
+            return selected.sum() / counts.sum().clamp(min=1.0)
+        weight = ray_weights.to(values.dtype)
+        total = (weight * counts).sum()
+        return (weight * selected.sum(dim=-1)).sum() / torch.where(total > 0, total, 1.0)
     if reduction != "per_ray":
         raise ValueError(f"reduction must be 'per_ray' or 'points', got '{reduction}'")
     per_ray = selected.sum(dim=-1) / counts.clamp(min=1.0)
     has = (counts > 0).to(values.dtype)
+    if ray_weights is not None:
+        has = has * ray_weights.to(values.dtype)
+        total = has.sum()
+        return (per_ray * has).sum() / torch.where(total > 0, total, 1.0)
     return (per_ray * has).sum() / has.sum().clamp(min=1.0)
 
 
@@ -67,6 +111,7 @@ def sdf_loss_terms(
     truncation: float,
     config: LossConfig,
     ray_mask: torch.Tensor | None = None,
+    ray_weights: torch.Tensor | None = None,
 ) -> SdfTerms:
     """Free-space, truncation-middle and truncation-tail losses of the sampled TSDF.
 
@@ -81,6 +126,7 @@ def sdf_loss_terms(
         depth: (N,) measured depth D, metres.
         truncation: T, metres.
         ray_mask: optional (N,) bool; rays where it is False are left out.
+        ray_weights: optional (N,) weights of the rays in each mean (:func:`masked_mean`).
 
     Returns:
         SdfTerms(free_space, trunc_middle, trunc_tail), scalar tensors.
@@ -101,9 +147,9 @@ def sdf_loss_terms(
     free = (sdf - 1.0).square()
     surface = (gap + sdf * truncation).square()
     return SdfTerms(
-        free_space=masked_mean(free, front, config.reduction),
-        trunc_middle=masked_mean(surface, middle, config.reduction),
-        trunc_tail=masked_mean(surface, tail, config.reduction),
+        free_space=masked_mean(free, front, config.reduction, ray_weights),
+        trunc_middle=masked_mean(surface, middle, config.reduction, ray_weights),
+        trunc_tail=masked_mean(surface, tail, config.reduction, ray_weights),
     )
 
 
@@ -130,6 +176,7 @@ def compute_losses(
     truncation: float,
     config: LossConfig,
     outlier_factor: float | None = None,
+    ray_weights: torch.Tensor | None = None,
 ) -> LossTerms:
     """All five loss terms and their weighted sum, for tracking and mapping alike.
 
@@ -138,7 +185,11 @@ def compute_losses(
     a third of the per-ray squared norm ||C_hat - C||^2), 0 when ``output.rgb`` is None;
     the TSDF terms from :func:`sdf_loss_terms`. With ``outlier_factor`` (tracking,
     release: 10) rays with |D_hat - D| > outlier_factor * median are dropped from every
-    term. total = lambda_fs fs + lambda_Tm Tm + lambda_Tt Tt + lambda_d d + lambda_c c.
+    term. With ``ray_weights`` w_r (mapping's depth-noise model,
+    :func:`depth_noise_weights`) the depth term is sum w_r (D_hat - D)^2 / sum w_r over
+    the kept rays and the TSDF terms are weighted means likewise; the colour term stays
+    unweighted (the weights model the depth's noise, not the colour's).
+    total = lambda_fs fs + lambda_Tm Tm + lambda_Tt Tt + lambda_d d + lambda_c c.
 
     Args:
         output: the rendering of ``rays`` (N rays, S samples).
@@ -146,6 +197,7 @@ def compute_losses(
         weights: the five lambdas.
         truncation: T, metres.
         outlier_factor: None (mapping) or the rejection factor (tracking).
+        ray_weights: None (plain means) or (N,) non-negative weights per ray.
 
     Returns:
         LossTerms (scalar tensors).
@@ -156,13 +208,22 @@ def compute_losses(
         keep = inlier_rays(residual, outlier_factor, keep)
     count = keep.sum().to(residual.dtype).clamp(min=1.0)
     zero = torch.zeros((), dtype=residual.dtype, device=residual.device)
-    depth_term = torch.where(keep, residual.square(), zero).sum() / count
+    if ray_weights is None:
+        depth_term = torch.where(keep, residual.square(), zero).sum() / count
+    else:
+        kept_weight = torch.where(keep, ray_weights.to(residual.dtype), zero)
+        total_weight = kept_weight.sum()
+        depth_term = (kept_weight * residual.square()).sum() / torch.where(
+            total_weight > 0, total_weight, 1.0
+        )
     if output.rgb is None:
         colour_term = zero
     else:
         colour_error = (output.rgb - rays.rgb).square().mean(dim=-1)
         colour_term = torch.where(keep, colour_error, zero).sum() / count
-    sdf_terms = sdf_loss_terms(output.sdf, output.z_vals, rays.depth, truncation, config, keep)
+    sdf_terms = sdf_loss_terms(
+        output.sdf, output.z_vals, rays.depth, truncation, config, keep, ray_weights
+    )
     total = (
         weights.free_space * sdf_terms.free_space
         + weights.trunc_middle * sdf_terms.trunc_middle

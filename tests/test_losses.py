@@ -6,7 +6,13 @@ import pytest
 import torch
 
 from eslam.config import LossConfig, LossWeights
-from eslam.losses import compute_losses, masked_mean, sdf_loss_terms
+from eslam.losses import (
+    compute_losses,
+    depth_noise_scale,
+    depth_noise_weights,
+    masked_mean,
+    sdf_loss_terms,
+)
 from eslam.types import RayBatch, RenderOutput
 
 F64 = torch.float64
@@ -37,6 +43,64 @@ def test_masked_mean_hand_values() -> None:
     close(masked_mean(values, mask, "per_ray"), 3.5)
     with pytest.raises(ValueError, match="reduction"):
         masked_mean(values, mask, "rays")
+
+
+def test_masked_mean_with_ray_weights_hand_values() -> None:
+    values = torch.tensor([[1.0, 3.0], [5.0, 0.0]], dtype=F64)
+    mask = torch.tensor([[True, True], [True, False]])
+    weights = torch.tensor([1.0, 3.0], dtype=F64)
+    close(masked_mean(values, mask, "points", weights), (1.0 + 3.0 + 15.0) / 5.0)
+    close(masked_mean(values, mask, "per_ray", weights), (2.0 + 15.0) / 4.0)
+    # A ray with no selected sample carries no weight; all-zero weights give 0, not nan.
+    empty = torch.tensor([[True, True], [False, False]])
+    close(masked_mean(values, empty, "per_ray", weights), 2.0)
+    close(masked_mean(values, mask, "points", torch.zeros(2, dtype=F64)), 0.0)
+    close(masked_mean(values, mask, "per_ray", torch.zeros(2, dtype=F64)), 0.0)
+
+
+@pytest.mark.parametrize("reduction", ["points", "per_ray"])
+def test_equal_ray_weights_give_the_plain_means(reduction: str) -> None:
+    config = LossConfig(reduction=reduction)
+    plain = sdf_loss_terms(S, Z, D, T, config)
+    for weight in (1.0, 7.0):
+        weighted = sdf_loss_terms(S, Z, D, T, config, ray_weights=torch.full((2,), weight))
+        for a, b in zip(plain, weighted, strict=True):
+            assert b.item() == pytest.approx(a.item(), rel=1e-12)
+
+
+def test_depth_noise_weights_are_inverse_variances() -> None:
+    depth = torch.tensor([0.75, 1.5, 3.0, 0.0], dtype=F64)
+    weights = depth_noise_weights(depth)
+    assert (weights[:3] / weights[1]).tolist() == pytest.approx([16.0, 1.0, 1.0 / 16.0])
+    assert weights[3] == 0.0
+    # sigma(D) / sigma(z0) = (D / z0)^2: w is (sigma(z0) / sigma(D))^2 up to a common factor.
+    assert torch.allclose(weights[:3] * 1.5**4, depth_noise_scale(depth[:3], 1.5).pow(-2))
+
+
+def test_ray_weights_weigh_depth_and_tsdf_terms_but_not_colour() -> None:
+    z = torch.tensor([[0.5, 1.0], [1.5, 2.0]], dtype=F64)
+    measured_rgb = torch.tensor([[0.0, 0.0, 0.0], [1.0, 1.0, 1.0]], dtype=F64)
+    rendered_rgb = torch.tensor([[0.3, 0.0, 0.0], [1.0, 0.4, 1.0]], dtype=F64)
+    output = render_output([1.1, 1.8], rendered_rgb, z)
+    rays = rays_of([1.0, 2.0], measured_rgb)
+    weights = depth_noise_weights(rays.depth)  # [1, 1/16]: the far ray counts less
+    plain = compute_losses(output, rays, LossWeights(), T, LossConfig())
+    noisy = compute_losses(output, rays, LossWeights(), T, LossConfig(), ray_weights=weights)
+    close(noisy.depth, (1.0 * 0.01 + 0.04 / 16.0) / (1.0 + 1.0 / 16.0))
+    close(noisy.colour, plain.colour.item())
+    # Free space: ray 1 has one front sample at (0 - 1)^2 = 1, ray 2 two: the same per ray.
+    close(noisy.free_space, 1.0)
+    # Outlier rejection and weights combine: the rejected ray's weight drops out.
+    far = compute_losses(
+        render_output([1.1, 1.8, 11.0], None, torch.cat([z, z[:1]])),
+        rays_of([1.0, 2.0, 1.0], torch.zeros(3, 3)),
+        LossWeights(),
+        T,
+        LossConfig(),
+        outlier_factor=10.0,
+        ray_weights=torch.tensor([1.0, 1.0 / 16.0, 1.0], dtype=F64),
+    )
+    close(far.depth, (0.01 + 0.04 / 16.0) / (1.0 + 1.0 / 16.0))
 
 
 def test_one_ray_terms() -> None:

@@ -458,6 +458,11 @@ class MappingConfig:
     0 = build them at every call (same results)."""
     weights: LossWeights = field(default_factory=LossWeights)
     """Loss weights while mapping (paper: 5, 200, 10, 0.1, 5)."""
+    weigh_depth_noise: bool = False
+    """Weigh each ray's depth and TSDF terms by D^-4, the inverse variance of depth whose
+    noise grows as D^2 (structured light, stereo: Khoshelham and Elberink 2012), in
+    weighted means (only the balance between near and far rays changes, not the terms'
+    scale); colour stays unweighted. false = every ray alike (the paper; the default)."""
 
     def __post_init__(self) -> None:
         _at_least(self, "every", 1)

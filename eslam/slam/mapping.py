@@ -25,7 +25,7 @@ import torch
 from eslam.config import LossConfig, MappingConfig, RenderConfig
 from eslam.field.scene_field import SceneField
 from eslam.geometry.pose import pose_from_quaternion_translation, quaternion_translation_from_pose
-from eslam.losses import compute_losses
+from eslam.losses import compute_losses, depth_noise_weights
 from eslam.slam.views import (
     RayDraws,
     View,
@@ -205,7 +205,9 @@ def mapping_loss(
     """The mapping loss over the window, a pure function of tensors (compilable).
 
     Rays through the pixels ``draws`` chose in each view at its current pose, rendered
-    with its jitter, scored by the shared loss with the mapping weights.
+    with its jitter, scored by the shared loss with the mapping weights; with
+    ``mapping.weigh_depth_noise`` each ray's depth-derived terms weigh D^-4
+    (:func:`~eslam.losses.depth_noise_weights`).
     """
     with stage("ray sampling"):
         current = window.current()
@@ -217,8 +219,14 @@ def mapping_loss(
         )
     output = render_drawn(field, rays, draws, settings.render)
     with stage("loss"):
+        weights = depth_noise_weights(rays.depth) if settings.mapping.weigh_depth_noise else None
         terms = compute_losses(
-            output, rays, settings.mapping.weights, field.truncation, settings.loss
+            output,
+            rays,
+            settings.mapping.weights,
+            field.truncation,
+            settings.loss,
+            ray_weights=weights,
         )
     return terms.total
 

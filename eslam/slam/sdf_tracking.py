@@ -65,6 +65,7 @@ import torch
 
 from eslam.config import SdfTrackerConfig
 from eslam.geometry.pose import pose_distance, se3_exp
+from eslam.losses import depth_noise_scale
 from eslam.render.renderer import SceneFieldLike
 from eslam.slam.tracking import RenderTracker, TrackingQuality, TrackingResult, frozen
 from eslam.slam.views import View, pixels_from_uniforms
@@ -97,17 +98,6 @@ def robust_cost(residual: torch.Tensor, scale: float, kind: str) -> torch.Tensor
         squared = residual.square()
         return 0.5 * scale**2 * squared / (squared + scale**2)
     raise ValueError(f"robust must be 'huber' or 'geman_mcclure', got '{kind}'")
-
-
-def depth_noise_scale(depth: torch.Tensor, reference: float | None) -> torch.Tensor:
-    """(N,) sigma(z) / sigma(z0) = (z / z0)^2 for camera depths z (metres): the
-    standard deviation of structured-light and stereo depth grows with the square of the
-    distance (Khoshelham and Elberink 2012, Kinect v1: sigma(z) ~ 1.4 mm z^2 / m^2; the
-    same law for disparity-based sensors), so a residual divided by it is in units of the
-    noise at z0. Ones when ``reference`` is None (every point alike)."""
-    if reference is None:
-        return torch.ones_like(depth)
-    return (depth / reference).square()
 
 
 def inside_bound(points: torch.Tensor, bound: torch.Tensor) -> torch.Tensor:

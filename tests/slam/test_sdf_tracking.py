@@ -15,11 +15,11 @@ from torch import nn
 from eslam.config import FieldConfig, SdfTrackerConfig
 from eslam.field.scene_field import SceneField
 from eslam.geometry.pose import pose_distance, se3_exp
+from eslam.losses import depth_noise_scale
 from eslam.render.rays import camera_directions
 from eslam.slam.sdf_tracking import (
     SdfTracker,
     constrained_directions,
-    depth_noise_scale,
     field_derivatives,
     linearise,
     robust_weights,

@@ -108,6 +108,16 @@ def test_losses_compile_as_one_graph() -> None:
     compiled_mapping = torch.compile(mapping_loss, fullgraph=True, backend="eager")
     eager = mapping_loss(field, [view, view], window, draws, mapping)
     assert torch.equal(eager, compiled_mapping(field, [view, view], window, draws, mapping))
+    noisy = MappingSettings(
+        dataclasses.replace(config.mapping, weigh_depth_noise=True), config.render, config.loss
+    )
+    ramp = view.depth.reshape(30, 40) * torch.linspace(0.5, 2.0, 40)  # depths 0.4-1.6 m
+    sloped = make_view(view.rgb.reshape(30, 40, 3), ramp, camera_directions(CAMERA), border=2)
+    views = [view, sloped]
+    plain_loss = mapping_loss(field, views, window, draws, mapping)
+    eager_noisy = mapping_loss(field, views, window, draws, noisy)
+    assert abs(eager_noisy.item() - plain_loss.item()) > 1e-3 * abs(plain_loss.item())
+    assert torch.equal(eager_noisy, compiled_mapping(field, views, window, draws, noisy))
 
 
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="no CUDA device")
