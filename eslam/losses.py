@@ -44,7 +44,7 @@ def depth_noise_scale(depth: torch.Tensor, reference: float | None) -> torch.Ten
 
 
 def depth_noise_weights(depth: torch.Tensor) -> torch.Tensor:
-    """Relative inverse-variance weights w = D^-4 (per square metre squared) of squared
+    """Relative inverse-variance weights w = D^-4 (units m^-4) of squared
     depth residuals, for measured depths D (N,) in metres; 0 where D <= 0 (no depth).
 
     Depth noise grows as sigma(D) ~ D^2 (:func:`depth_noise_scale`), so the inverse
