@@ -56,6 +56,12 @@ def depth_noise_weights(depth: torch.Tensor) -> torch.Tensor:
     return torch.where(depth > 0, safe.pow(-4), torch.zeros_like(depth))
 
 
+def ratio_or_zero(numerator: torch.Tensor, denominator: torch.Tensor) -> torch.Tensor:
+    """numerator / denominator, and 0 where the denominator is 0 (an empty mean), for a
+    non-negative denominator (a count or a sum of weights); no host synchronisation."""
+    return numerator / torch.where(denominator > 0, denominator, torch.ones_like(denominator))
+
+
 def masked_mean(
     values: torch.Tensor,
     mask: torch.Tensor,
@@ -88,20 +94,15 @@ def masked_mean(
     selected = torch.where(mask, values, torch.zeros_like(values))
     counts = mask.sum(dim=-1).to(values.dtype)
     if reduction == "points":
-        if ray_weights is None:
-            return selected.sum() / counts.sum().clamp(min=1.0)
-        weight = ray_weights.to(values.dtype)
-        total = (weight * counts).sum()
-        return (weight * selected.sum(dim=-1)).sum() / torch.where(total > 0, total, 1.0)
-    if reduction != "per_ray":
+        sums, shares = selected.sum(dim=-1), counts
+    elif reduction == "per_ray":
+        sums, shares = selected.sum(dim=-1) / counts.clamp(min=1.0), (counts > 0).to(values.dtype)
+    else:
         raise ValueError(f"reduction must be 'per_ray' or 'points', got '{reduction}'")
-    per_ray = selected.sum(dim=-1) / counts.clamp(min=1.0)
-    has = (counts > 0).to(values.dtype)
     if ray_weights is not None:
-        has = has * ray_weights.to(values.dtype)
-        total = has.sum()
-        return (per_ray * has).sum() / torch.where(total > 0, total, 1.0)
-    return (per_ray * has).sum() / has.sum().clamp(min=1.0)
+        weight = ray_weights.to(values.dtype)
+        sums, shares = sums * weight, shares * weight
+    return ratio_or_zero(sums.sum(), shares.sum())
 
 
 def sdf_loss_terms(
@@ -206,21 +207,19 @@ def compute_losses(
     keep = rays.depth > 0
     if outlier_factor is not None:
         keep = inlier_rays(residual, outlier_factor, keep)
-    count = keep.sum().to(residual.dtype).clamp(min=1.0)
+    count = keep.sum().to(residual.dtype)
     zero = torch.zeros((), dtype=residual.dtype, device=residual.device)
-    if ray_weights is None:
-        depth_term = torch.where(keep, residual.square(), zero).sum() / count
-    else:
-        kept_weight = torch.where(keep, ray_weights.to(residual.dtype), zero)
-        total_weight = kept_weight.sum()
-        depth_term = (kept_weight * residual.square()).sum() / torch.where(
-            total_weight > 0, total_weight, 1.0
-        )
+    share = keep.to(residual.dtype)
+    if ray_weights is not None:
+        share = torch.where(keep, ray_weights.to(residual.dtype), zero)
+    depth_term = ratio_or_zero(
+        torch.where(keep, share * residual.square(), zero).sum(), share.sum()
+    )
     if output.rgb is None:
         colour_term = zero
     else:
         colour_error = (output.rgb - rays.rgb).square().mean(dim=-1)
-        colour_term = torch.where(keep, colour_error, zero).sum() / count
+        colour_term = ratio_or_zero(torch.where(keep, colour_error, zero).sum(), count)
     sdf_terms = sdf_loss_terms(
         output.sdf, output.z_vals, rays.depth, truncation, config, keep, ray_weights
     )

@@ -68,6 +68,17 @@ def test_equal_ray_weights_give_the_plain_means(reduction: str) -> None:
             assert b.item() == pytest.approx(a.item(), rel=1e-12)
 
 
+def test_unequal_ray_weights_reach_every_tsdf_term() -> None:
+    weights = torch.tensor([1.0, 3.0], dtype=F64)
+    per_ray = sdf_loss_terms(S, Z, D, T, LossConfig(reduction="per_ray"), ray_weights=weights)
+    close(per_ray.free_space, (0.025 + 3.0 * 0.29 / 3) / 4.0)
+    close(per_ray.trunc_middle, (1e-4 + 3.0 * 0.0) / 4.0)
+    close(per_ray.trunc_tail, 6.5e-4)
+    points = sdf_loss_terms(S, Z, D, T, LossConfig(reduction="points"), ray_weights=weights)
+    close(points.free_space, (0.01 + 0.04 + 3.0 * (0.0 + 0.04 + 0.25)) / (2 + 3.0 * 3))
+    close(points.trunc_middle, (1e-4 + 1e-4 + 3.0 * 0.0) / (2 + 3.0 * 1))
+
+
 def test_depth_noise_weights_are_inverse_variances() -> None:
     depth = torch.tensor([0.75, 1.5, 3.0, 0.0], dtype=F64)
     weights = depth_noise_weights(depth)
@@ -88,8 +99,19 @@ def test_ray_weights_weigh_depth_and_tsdf_terms_but_not_colour() -> None:
     noisy = compute_losses(output, rays, LossWeights(), T, LossConfig(), ray_weights=weights)
     close(noisy.depth, (1.0 * 0.01 + 0.04 / 16.0) / (1.0 + 1.0 / 16.0))
     close(noisy.colour, plain.colour.item())
-    # Free space: ray 1 has one front sample at (0 - 1)^2 = 1, ray 2 two: the same per ray.
-    close(noisy.free_space, 1.0)
+    # The TSDF terms get the weights too (the fixture's rays: D = 1 and 2, weights 1, 1/16).
+    fixture = RenderOutput(depth=D, rgb=None, z_vals=Z, sdf=S, weights=torch.zeros_like(S))
+    tsdf = compute_losses(
+        fixture,
+        rays_of([1.0, 2.0], torch.zeros(2, 3)),
+        LossWeights(),
+        T,
+        LossConfig(),
+        ray_weights=weights,
+    )
+    close(tsdf.free_space, (0.025 + 0.29 / 3 / 16.0) / (1.0 + 1.0 / 16.0))
+    close(tsdf.trunc_middle, 1e-4 / (1.0 + 1.0 / 16.0))
+    close(tsdf.trunc_tail, 6.5e-4)  # only ray 1 has tail samples
     # Outlier rejection and weights combine: the rejected ray's weight drops out.
     far = compute_losses(
         render_output([1.1, 1.8, 11.0], None, torch.cat([z, z[:1]])),
