@@ -253,6 +253,26 @@ def test_counts_are_checked_at_load_naming_the_key(override: str, least: int) ->
     assert message.startswith(f"command line: {key} must be >= {least}"), message
 
 
+@pytest.mark.parametrize(
+    ("override", "got"),
+    [
+        ("tracking.sdf.colour_weight=-0.1", "-0.1"),
+        ("tracking.sdf.colour_robust_scale=0", "0.0"),
+        ("tracking.sdf.robust_scale=0", "0.0"),
+        ("tracking.sdf.max_sdf=1.5", "1.5"),
+        ("tracking.sdf.min_inlier_fraction=1.0", "1.0"),
+        ("tracking.sdf.max_residual=-0.01", "-0.01"),
+    ],
+)
+def test_sdf_tracker_checks_name_one_key_and_its_value(override: str, got: str) -> None:
+    """Each SDF tracker setting is checked on its own: a combined check ("robust_scale
+    must be > 0 and max_sdf in (0, 1]") named neither the bad key nor its value."""
+    key = override.split("=")[0]
+    message = error_of(CONFIGS / "base.yaml", (override,))
+    assert message.startswith(f"command line: {key} must be"), message
+    assert message.endswith(f"got {got}"), message
+
+
 @pytest.mark.parametrize("override", ["mapping.window=2", "field.truncation=0"])
 def test_a_bad_value_from_the_command_line_blames_the_command_line(
     tmp_path: Path, override: str

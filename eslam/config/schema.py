@@ -333,17 +333,25 @@ class SdfTrackerConfig:
         reference = self.noise_reference_depth
         if reference is not None and not reference > 0:
             raise ValueError(f"noise_reference_depth must be > 0 metres or null, got {reference}")
-        if self.colour_weight < 0 or self.colour_robust_scale <= 0:
-            raise ValueError("colour_weight must be >= 0 and colour_robust_scale > 0")
+        if self.colour_weight < 0:
+            raise ValueError(f"colour_weight must be >= 0, got {self.colour_weight}")
+        if not self.colour_robust_scale > 0:
+            raise ValueError(f"colour_robust_scale must be > 0, got {self.colour_robust_scale}")
         if not self.levels or min(self.levels) < 6 or list(self.levels) != sorted(self.levels):
             raise ValueError(f"levels must be increasing point counts >= 6, got {self.levels}")
         _at_least(self, "iterations", 1)
-        if self.robust_scale <= 0 or not 0 < self.max_sdf <= 1:
-            raise ValueError("robust_scale must be > 0 and max_sdf in (0, 1]")
+        if not self.robust_scale > 0:
+            raise ValueError(f"robust_scale must be > 0 metres, got {self.robust_scale}")
+        if not 0 < self.max_sdf <= 1:
+            raise ValueError(f"max_sdf must be in (0, 1], got {self.max_sdf}")
         if self.degeneracy < 0:
             raise ValueError(f"degeneracy must be >= 0, got {self.degeneracy}")
-        if not 0 <= self.min_inlier_fraction < 1 or self.max_residual <= 0:
-            raise ValueError("min_inlier_fraction must be in [0, 1), max_residual > 0")
+        if not 0 <= self.min_inlier_fraction < 1:
+            raise ValueError(
+                f"min_inlier_fraction must be in [0, 1), got {self.min_inlier_fraction}"
+            )
+        if not self.max_residual > 0:
+            raise ValueError(f"max_residual must be > 0 metres, got {self.max_residual}")
 
 
 @dataclass
