@@ -262,11 +262,18 @@ def test_counts_are_checked_at_load_naming_the_key(override: str, least: int) ->
         ("tracking.sdf.max_sdf=1.5", "1.5"),
         ("tracking.sdf.min_inlier_fraction=1.0", "1.0"),
         ("tracking.sdf.max_residual=-0.01", "-0.01"),
+        ("scene.grow_margin=-0.1", "-0.1"),
+        ("field.decoder_layers=0", "0"),
+        ("field.beta_init=0", "0.0"),
+        ("field.bound_multiple=-1", "-1.0"),
+        ("render.far_factor=1.0", "1.0"),
+        ("output.checkpoint_every=0", "0"),
+        ("output.mesh_resolution=0", "0.0"),
     ],
 )
-def test_sdf_tracker_checks_name_one_key_and_its_value(override: str, got: str) -> None:
-    """Each SDF tracker setting is checked on its own: a combined check ("robust_scale
-    must be > 0 and max_sdf in (0, 1]") named neither the bad key nor its value."""
+def test_checks_name_one_key_and_its_value(override: str, got: str) -> None:
+    """Each setting is checked on its own: a combined check ("robust_scale must be > 0
+    and max_sdf in (0, 1]") named neither the bad key nor its value."""
     key = override.split("=")[0]
     message = error_of(CONFIGS / "base.yaml", (override,))
     assert message.startswith(f"command line: {key} must be"), message

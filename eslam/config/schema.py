@@ -143,8 +143,9 @@ class SceneConfig:
             len(self.bound) != 3 or any(len(p) != 2 or not p[0] < p[1] for p in self.bound)
         ):
             raise ValueError(f"bound must be 3 pairs [min, max] with min < max, got {self.bound}")
-        if self.auto_bound_margin < 0 or self.grow_margin < 0:
-            raise ValueError("auto_bound_margin and grow_margin must be >= 0 metres")
+        for name in ("auto_bound_margin", "grow_margin"):
+            if not getattr(self, name) >= 0:
+                raise ValueError(f"{name} must be >= 0 metres, got {getattr(self, name)}")
         if not 0.0 <= self.grow_threshold < 1.0:
             raise ValueError(f"grow_threshold must be in [0, 1), got {self.grow_threshold}")
         if self.max_extent <= 0:
@@ -195,10 +196,11 @@ class FieldConfig:
             values = getattr(self, name)
             if len(values) != 2 or min(values) <= 0:
                 raise ValueError(f"{name} must be two positive cell sizes, got {values}")
-        if self.channels <= 0 or self.decoder_hidden <= 0 or self.decoder_layers < 1:
-            raise ValueError("channels, decoder_hidden and decoder_layers must be positive")
-        if self.truncation <= 0 or self.beta_init <= 0 or self.bound_multiple <= 0:
-            raise ValueError("truncation, beta_init and bound_multiple must be positive")
+        for name in ("channels", "decoder_hidden", "decoder_layers"):
+            _at_least(self, name, 1)
+        for name in ("truncation", "beta_init", "bound_multiple"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")
 
 
 @dataclass
@@ -226,8 +228,10 @@ class RenderConfig:
         _at_least(self, "samples_stratified", 1)
         _at_least(self, "samples_surface", 0)
         _at_least(self, "samples_no_depth", 2)
-        if self.surface_band <= 0 or self.far_factor <= 1.0:
-            raise ValueError("surface_band must be > 0 and far_factor > 1")
+        if not self.surface_band > 0:
+            raise ValueError(f"surface_band must be > 0, got {self.surface_band}")
+        if not self.far_factor > 1.0:
+            raise ValueError(f"far_factor must be > 1, got {self.far_factor}")
 
 
 @dataclass
@@ -506,8 +510,9 @@ class OutputConfig:
     """Show a progress bar (frames/s, current ATE when ground truth exists)."""
 
     def __post_init__(self) -> None:
-        if self.checkpoint_every < 1 or self.mesh_resolution <= 0:
-            raise ValueError("checkpoint_every must be >= 1 and mesh_resolution > 0")
+        _at_least(self, "checkpoint_every", 1)
+        if not self.mesh_resolution > 0:
+            raise ValueError(f"mesh_resolution must be > 0 metres, got {self.mesh_resolution}")
 
 
 @dataclass
