@@ -269,11 +269,14 @@ def test_counts_are_checked_at_load_naming_the_key(override: str, least: int) ->
         ("render.far_factor=1.0", "1.0"),
         ("output.checkpoint_every=0", "0"),
         ("output.mesh_resolution=0", "0.0"),
+        ("scene.max_extent=.nan", "nan"),
+        ("render.surface_band=.nan", "nan"),
     ],
 )
 def test_checks_name_one_key_and_its_value(override: str, got: str) -> None:
     """Each setting is checked on its own: a combined check ("robust_scale must be > 0
-    and max_sdf in (0, 1]") named neither the bad key nor its value."""
+    and max_sdf in (0, 1]") named neither the bad key nor its value. NaN fails the
+    checks too ("x <= 0" let it through)."""
     key = override.split("=")[0]
     message = error_of(CONFIGS / "base.yaml", (override,))
     assert message.startswith(f"command line: {key} must be"), message

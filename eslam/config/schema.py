@@ -12,14 +12,22 @@ from dataclasses import dataclass, field
 from typing import Literal
 
 
-def _at_least(section: object, name: str, least: int) -> None:
-    """Raise ValueError naming ``name`` unless the count ``section.name`` is >= ``least``.
+def _at_least(section: object, name: str, least: float, unit: str = "") -> None:
+    """Raise ValueError naming ``name`` unless ``section.name`` is >= ``least`` (NaN fails).
 
     One check per field, so the loader names the exact key (and the file that set it).
     """
     value = getattr(section, name)
-    if value < least:
-        raise ValueError(f"{name} must be >= {least}, got {value}")
+    if not value >= least:
+        raise ValueError(f"{name} must be >= {least}{unit}, got {value}")
+
+
+def _positive(section: object, name: str, unit: str = "") -> None:
+    """Raise ValueError naming ``name`` unless ``section.name`` is > 0 (NaN fails); one
+    check per field, as :func:`_at_least`."""
+    value = getattr(section, name)
+    if not value > 0:
+        raise ValueError(f"{name} must be > 0{unit}, got {value}")
 
 
 @dataclass
@@ -143,13 +151,11 @@ class SceneConfig:
             len(self.bound) != 3 or any(len(p) != 2 or not p[0] < p[1] for p in self.bound)
         ):
             raise ValueError(f"bound must be 3 pairs [min, max] with min < max, got {self.bound}")
-        for name in ("auto_bound_margin", "grow_margin"):
-            if not getattr(self, name) >= 0:
-                raise ValueError(f"{name} must be >= 0 metres, got {getattr(self, name)}")
+        _at_least(self, "auto_bound_margin", 0, " metres")
+        _at_least(self, "grow_margin", 0, " metres")
         if not 0.0 <= self.grow_threshold < 1.0:
             raise ValueError(f"grow_threshold must be in [0, 1), got {self.grow_threshold}")
-        if self.max_extent <= 0:
-            raise ValueError(f"max_extent must be positive metres, got {self.max_extent}")
+        _positive(self, "max_extent", " metres")
 
 
 @dataclass
@@ -199,8 +205,7 @@ class FieldConfig:
         for name in ("channels", "decoder_hidden", "decoder_layers"):
             _at_least(self, name, 1)
         for name in ("truncation", "beta_init", "bound_multiple"):
-            if not getattr(self, name) > 0:
-                raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")
+            _positive(self, name)
 
 
 @dataclass
@@ -228,8 +233,7 @@ class RenderConfig:
         _at_least(self, "samples_stratified", 1)
         _at_least(self, "samples_surface", 0)
         _at_least(self, "samples_no_depth", 2)
-        if not self.surface_band > 0:
-            raise ValueError(f"surface_band must be > 0, got {self.surface_band}")
+        _positive(self, "surface_band")
         if not self.far_factor > 1.0:
             raise ValueError(f"far_factor must be > 1, got {self.far_factor}")
 
@@ -339,13 +343,11 @@ class SdfTrackerConfig:
             raise ValueError(f"noise_reference_depth must be > 0 metres or null, got {reference}")
         if self.colour_weight < 0:
             raise ValueError(f"colour_weight must be >= 0, got {self.colour_weight}")
-        if not self.colour_robust_scale > 0:
-            raise ValueError(f"colour_robust_scale must be > 0, got {self.colour_robust_scale}")
+        _positive(self, "colour_robust_scale")
         if not self.levels or min(self.levels) < 6 or list(self.levels) != sorted(self.levels):
             raise ValueError(f"levels must be increasing point counts >= 6, got {self.levels}")
         _at_least(self, "iterations", 1)
-        if not self.robust_scale > 0:
-            raise ValueError(f"robust_scale must be > 0 metres, got {self.robust_scale}")
+        _positive(self, "robust_scale", " metres")
         if not 0 < self.max_sdf <= 1:
             raise ValueError(f"max_sdf must be in (0, 1], got {self.max_sdf}")
         if self.degeneracy < 0:
@@ -354,8 +356,7 @@ class SdfTrackerConfig:
             raise ValueError(
                 f"min_inlier_fraction must be in [0, 1), got {self.min_inlier_fraction}"
             )
-        if not self.max_residual > 0:
-            raise ValueError(f"max_residual must be > 0 metres, got {self.max_residual}")
+        _positive(self, "max_residual", " metres")
 
 
 @dataclass
@@ -374,8 +375,7 @@ class HybridTrackerConfig:
     def __post_init__(self) -> None:
         if self.render_iterations < 1:
             raise ValueError(f"render_iterations must be >= 1, got {self.render_iterations}")
-        if not self.lr_factor > 0:
-            raise ValueError(f"lr_factor must be > 0, got {self.lr_factor}")
+        _positive(self, "lr_factor")
 
 
 TRACKING_METHODS = ("render", "sdf", "hybrid")
@@ -511,8 +511,7 @@ class OutputConfig:
 
     def __post_init__(self) -> None:
         _at_least(self, "checkpoint_every", 1)
-        if not self.mesh_resolution > 0:
-            raise ValueError(f"mesh_resolution must be > 0 metres, got {self.mesh_resolution}")
+        _positive(self, "mesh_resolution", " metres")
 
 
 @dataclass
@@ -536,8 +535,7 @@ class ViewerConfig:
         _at_least(self, "render_every", 0)
         _at_least(self, "render_downscale", 1)
         _at_least(self, "mesh_every", 0)
-        if not self.mesh_resolution > 0:
-            raise ValueError(f"mesh_resolution must be > 0, got {self.mesh_resolution}")
+        _positive(self, "mesh_resolution", " metres")
 
 
 @dataclass
