@@ -27,6 +27,7 @@ from eslam.geometry import (
     pose_from_quaternion_translation,
     quaternion_to_matrix,
     quaternion_translation_from_pose,
+    renormalise_rotation,
     rotation_angle,
     se3_exp,
     se3_log,
@@ -426,6 +427,34 @@ def test_constant_velocity_extrapolation_reproduces_constant_twist() -> None:
     assert distance.max().item() < TOL and angle.max().item() < TOL
     # Standing still predicts standing still.
     assert_close(extrapolate_constant_velocity(start, start), start.numpy(), TOL)
+
+
+def test_constant_velocity_prediction_of_predictions_stays_rigid() -> None:
+    """Frames kept at the motion model's pose (failed frames) are predicted from
+    predictions: R_k R_(k-1)^T R_k multiplied float32's orthonormality error by ~2.4 a
+    frame, so without pulling the rotation back onto SO(3) it passed 1 after ~20 frames
+    and overflowed after ~25; each prediction must stay a rotation and keep its speed."""
+    step = se3_exp(torch.tensor([0.007, 0.001, 0.002, 0.003, 0.005, 0.001]))
+    poses = [torch.eye(4), step]
+    for _ in range(60):
+        poses.append(extrapolate_constant_velocity(poses[-2], poses[-1]))
+    rotation = poses[-1][:3, :3]
+    assert torch.isfinite(poses[-1]).all()
+    assert (rotation @ rotation.T - torch.eye(3)).abs().max().item() < 1e-5
+    exact = torch.linalg.matrix_power(step.double(), len(poses) - 1)
+    distance, angle = pose_distance(poses[-1].double(), exact)
+    assert distance.item() < 1e-4 and angle.item() < 1e-4
+
+
+def test_renormalise_rotation_matches_the_polar_factor() -> None:
+    rotation = random_poses(16, seed=5)[:, :3, :3]
+    noisy = (
+        rotation + 1e-3 * torch.randn(16, 3, 3, generator=torch.Generator().manual_seed(2)).double()
+    )
+    fixed = renormalise_rotation(noisy)
+    assert_close(fixed, orthonormalize_rotation(noisy).numpy(), 1e-10)
+    assert_close(renormalise_rotation(rotation), rotation.numpy(), TIGHT)
+    assert renormalise_rotation(noisy.float()).dtype == torch.float32
 
 
 # --- orthonormalisation and distances -------------------------------------------------------
