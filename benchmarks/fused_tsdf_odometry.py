@@ -1,0 +1,305 @@
+"""KinectFusion-style odometry: what the 7-Scenes reference's own method class scores.
+
+7-Scenes' ground truth comes from KinectFusion (Newcombe et al., ISMAR 2011) run on
+the same depth images, so its ATE figures measure how closely a tracker reproduces
+that system's trajectory. This runs the same method class with none of ESLAM: every
+frame's depth is fused into a voxel TSDF at its tracked pose (Curless and Levoy 1996:
+the running average of the projective TSDF,
+:func:`eslam.slam.warm_start.projective_tsdf`), and each new frame is tracked against
+that volume from the constant-velocity guess by eslam's SDF tracker (the config's
+``tracking.sdf`` settings and border: the Levenberg-Marquardt the ``sdf`` and ``hybrid``
+trackers run on the neural map; point-to-implicit residuals where KinectFusion uses
+projective point-to-plane ICP against a raycast of the same volume). No neural field,
+no mapping, no rendering. A frame the tracker reports as failed keeps the guess and is
+not fused, as the run loop does with keyframes.
+
+It writes ``trajectory.txt`` into ``--out`` (readable by ``eslam ate`` and
+``benchmarks/trajectory_consistency.py``) and appends ATE RMSE, Sim(3) ATE and scale,
+the failed frames and the time per frame to docs/benchmarks.md.
+
+    python benchmarks/fused_tsdf_odometry.py --config configs/sevenscenes/redkitchen.yaml \\
+        --data ../shared/data/7scenes-redkitchen --frames 400 --out RUN_FOLDER
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _machine import (
+    DEFAULT_DOCS,
+    add_device_argument,
+    check_device,
+    command_line,
+    load_average,
+    publish,
+    section_head,
+)
+
+from eslam.config import load_config
+from eslam.data import open_sequence
+from eslam.evaluate.trajectory import absolute_trajectory_error
+from eslam.geometry.camera import project_points
+from eslam.geometry.pose import extrapolate_constant_velocity
+from eslam.io.trajectory import write_tum_trajectory
+from eslam.render.rays import camera_directions
+from eslam.slam.sdf_tracking import track_sdf
+from eslam.slam.views import make_view
+from eslam.slam.warm_start import projective_tsdf
+from eslam.types import FieldOutput, Intrinsics
+
+UNSEEN = 1.0
+"""TSDF of a voxel no frame has seen: the flat free-space value, so the SDF tracker gives
+points there weight 0 (|s| >= max_sdf)."""
+
+
+@dataclass(frozen=True, eq=False)
+class VoxelTsdf:
+    """A dense voxel TSDF, queried like the scene field by the SDF tracker.
+
+    Attributes:
+        origin: (3,) world position of voxel (0, 0, 0)'s centre, metres.
+        voxel: edge length, metres.
+        truncation: T, metres; ``values`` are in units of T, in [-1, 1].
+        values: (Z, Y, X) running-average TSDF (index [k, j, i] is the voxel at
+            origin + voxel * (i, j, k)); :data:`UNSEEN` where ``weights`` is 0.
+        weights: (Z, Y, X) number of frames averaged into each voxel.
+    """
+
+    origin: torch.Tensor
+    voxel: float
+    truncation: float
+    values: torch.Tensor
+    weights: torch.Tensor
+
+    @property
+    def bound(self) -> torch.Tensor:
+        """(3, 2) box spanned by the voxel centres, [[xmin, xmax], ...], metres."""
+        size = torch.tensor(self.values.shape[::-1], dtype=self.origin.dtype) - 1
+        far = self.origin + self.voxel * size.to(self.origin.device)
+        return torch.stack((self.origin, far), dim=1)
+
+    def query(self, points: torch.Tensor, with_rgb: bool = False) -> FieldOutput:
+        """Trilinear TSDF at (N, 3) world points (units of T; differentiable in the
+        points), read as the border voxel outside the box. No colour."""
+        if with_rgb:
+            raise ValueError("a fused TSDF holds no colour: set tracking.sdf.colour_weight: 0")
+        low, high = self.bound.unbind(dim=1)
+        normalised = 2.0 * (points - low) / (high - low) - 1.0  # grid_sample's (x, y, z)
+        sampled = torch.nn.functional.grid_sample(
+            self.values[None, None],
+            normalised[None, None, None],
+            mode="bilinear",  # trilinear on a 5-D input
+            padding_mode="border",
+            align_corners=True,
+        )
+        return FieldOutput(sdf=sampled.reshape(-1), rgb=None)
+
+
+def empty_volume(centre: torch.Tensor, extent: float, voxel: float, truncation: float) -> VoxelTsdf:
+    """A cube of side ``extent`` (metres) centred on ``centre`` (3,), every voxel unseen."""
+    count = int(np.ceil(extent / voxel)) + 1
+    shape = (count, count, count)
+    origin = centre - 0.5 * voxel * (count - 1)
+    values = torch.full(shape, UNSEEN, dtype=torch.float32, device=centre.device)
+    return VoxelTsdf(origin, voxel, truncation, values, torch.zeros_like(values))
+
+
+def frustum_block(
+    volume: VoxelTsdf, depth: torch.Tensor, intrinsics: Intrinsics, c2w: torch.Tensor
+) -> tuple[slice, slice, slice] | None:
+    """(z, y, x) index slices of the voxels in the box around the camera centre and its
+    view frustum out to the frame's farthest depth plus T; None when it misses the volume."""
+    far = float(depth.max()) + volume.truncation
+    corners = torch.tensor(
+        [[0.0, 0.0], [intrinsics.width, 0.0], [0.0, intrinsics.height],
+         [intrinsics.width, intrinsics.height]],
+        dtype=c2w.dtype, device=c2w.device,
+    )  # fmt: skip
+    rays = torch.stack(
+        (
+            (corners[:, 0] - intrinsics.cx) / intrinsics.fx,
+            (corners[:, 1] - intrinsics.cy) / intrinsics.fy,
+            torch.ones(4, dtype=c2w.dtype, device=c2w.device),
+        ),
+        dim=-1,
+    )
+    camera_points = torch.cat((torch.zeros(1, 3, dtype=c2w.dtype, device=c2w.device), far * rays))
+    world = camera_points @ c2w[:3, :3].T + c2w[:3, 3]
+    low = torch.floor((world.min(dim=0).values - volume.origin) / volume.voxel).long()
+    high = torch.ceil((world.max(dim=0).values - volume.origin) / volume.voxel).long() + 1
+    size = torch.tensor(volume.values.shape[::-1], device=low.device)
+    low, high = low.clamp(min=0), torch.minimum(high, size)
+    if bool((high <= low).any()):
+        return None
+    x, y, z = (slice(int(a), int(b)) for a, b in zip(low, high, strict=True))
+    return z, y, x
+
+
+def fuse(volume: VoxelTsdf, depth: torch.Tensor, intrinsics: Intrinsics, c2w: torch.Tensor) -> None:
+    """Average one depth image (H, W; metres, 0 = invalid) seen from ``c2w`` into
+    ``volume`` in place (Curless and Levoy 1996; KinectFusion's eq. 11-12 with weight 1).
+
+    Each voxel centre p projects to its nearest pixel with depth D; with z its depth in
+    the camera, the observation is s = clip((D - z) / T, -1, 1) where D > 0 and
+    D - z >= -T (voxels further behind the surface are not observed), and the voxel's
+    value becomes (W s_old + s) / (W + 1), W <- W + 1."""
+    block = frustum_block(volume, depth, intrinsics, c2w)
+    if block is None:
+        return
+    values, weights = volume.values[block], volume.weights[block]  # views
+    axes = [torch.arange(b.start, b.stop, device=depth.device) for b in block]
+    k, j, i = torch.meshgrid(*axes, indexing="ij")
+    centres = volume.origin + volume.voxel * torch.stack((i, j, k), dim=-1).to(depth.dtype)
+    uv, z = project_points(centres, intrinsics, c2w.to(depth.dtype))
+    column, row = torch.round(uv[..., 0]).long(), torch.round(uv[..., 1]).long()
+    inside = (z > 0) & (column >= 0) & (column < intrinsics.width)
+    inside &= (row >= 0) & (row < intrinsics.height)
+    measured = torch.where(
+        inside,
+        depth[row.clamp(0, intrinsics.height - 1), column.clamp(0, intrinsics.width - 1)],
+        torch.zeros_like(z),
+    )
+    observed = inside & (measured > 0) & (measured - z >= -volume.truncation)
+    observation = projective_tsdf(z, measured, volume.truncation)
+    total = weights + observed.to(weights.dtype)
+    average = (values * weights + observation) / total.clamp_min(1.0)
+    values.copy_(torch.where(observed, average, values))
+    weights.copy_(total)
+
+
+@dataclass(frozen=True)
+class Odometry:
+    """A fused-TSDF odometry run: camera-to-world poses (N, 4, 4) float64, the frames
+    whose tracking failed, and the seconds spent per frame (tracking plus fusion)."""
+
+    poses: np.ndarray
+    failed: list[int]
+    seconds_per_frame: float
+
+
+def fused_tsdf_odometry(
+    config_path: Path,
+    data: Path,
+    frames: int,
+    voxel: float,
+    extent: float,
+    device: torch.device,
+    seed: int = 0,
+) -> tuple[Odometry, np.ndarray | None, np.ndarray]:
+    """Track the first ``frames`` frames of ``data`` against a TSDF fused from them
+    (module doc); the volume is a cube of side ``extent`` centred ``extent / 2 - 1`` m
+    in front of the first camera. Returns the odometry, the ground truth poses (or None)
+    and the timestamps."""
+    config = load_config(config_path, [f"data.path={data}", "data.register_colour=false"])
+    sequence = open_sequence(config.data)
+    if frames < 2 or frames > len(sequence):
+        raise SystemExit(f"{data}: --frames must be in 2..{len(sequence)}, got {frames}")
+    intrinsics = sequence.intrinsics
+    directions = camera_directions(intrinsics, device)
+    settings = config.tracking.sdf
+    generator = torch.Generator(device=device).manual_seed(seed)
+    first = sequence[0]
+    start = first.pose_gt if first.pose_gt is not None else np.eye(4)
+    poses = [torch.as_tensor(start, dtype=torch.float32, device=device)]
+    forward = poses[0][:3, 2] * (0.5 * extent - 1.0)
+    truncation = config.field.truncation
+    volume = empty_volume(poses[0][:3, 3] + forward, extent, voxel, truncation)
+    depth = torch.as_tensor(first.depth, device=device)
+    fuse(volume, depth, intrinsics, poses[0])
+    failed = []
+    begin = time.perf_counter()
+    for index in range(1, frames):
+        frame = sequence[index]
+        depth = torch.as_tensor(frame.depth, device=device)
+        rgb = torch.as_tensor(frame.rgb, device=device).float() / 255.0
+        view = make_view(rgb, depth, directions, border=config.tracking.border)
+        guess = poses[-1]
+        if config.tracking.constant_velocity and len(poses) > 1:
+            guess = extrapolate_constant_velocity(poses[-2], poses[-1])
+        result = track_sdf(volume, view, guess, settings, generator)
+        if result.quality is not None and result.quality.failed:
+            failed.append(index)
+            poses.append(guess)
+            continue
+        poses.append(result.pose)
+        fuse(volume, depth, intrinsics, result.pose)
+    seconds = (time.perf_counter() - begin) / (frames - 1)
+    estimate = torch.stack(poses).double().cpu().numpy()
+    truth = sequence.gt_poses()
+    timestamps = sequence.timestamps()[:frames]
+    odometry = Odometry(estimate, failed, seconds)
+    return odometry, (truth[:frames] if truth is not None else None), timestamps
+
+
+def parse_args(argv: list[str] | None) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--config", type=Path, required=True)
+    parser.add_argument("--data", type=Path, required=True, help="the sequence folder")
+    parser.add_argument("--frames", type=int, required=True)
+    parser.add_argument("--out", type=Path, required=True, help="folder for trajectory.txt")
+    parser.add_argument("--voxel", type=float, default=0.02, help="metres (0.02)")
+    parser.add_argument("--extent", type=float, default=6.0, help="cube side, metres (6)")
+    parser.add_argument("--seed", type=int, default=0, help="of the SDF tracker's points")
+    parser.add_argument("--threads", type=int, default=0, help="0 = torch's default")
+    add_device_argument(parser)
+    parser.add_argument("--docs", type=Path, default=DEFAULT_DOCS)
+    parser.add_argument("--no-append", action="store_true")
+    parser.add_argument("--note", default="")
+    args = parser.parse_args(argv)
+    if args.voxel <= 0 or args.extent <= 2 * args.voxel or args.threads < 0:
+        parser.error("--voxel must be > 0, --extent > 2 voxels, --threads >= 0")
+    check_device(parser, args)
+    return args
+
+
+def main(argv: list[str] | None = None) -> None:
+    args = parse_args(argv)
+    if args.threads > 0:
+        torch.set_num_threads(args.threads)
+    device = torch.device(args.device)
+    load_start = load_average()
+    odometry, truth, timestamps = fused_tsdf_odometry(
+        args.config, args.data, args.frames, args.voxel, args.extent, device, args.seed
+    )
+    args.out.mkdir(parents=True, exist_ok=True)
+    write_tum_trajectory(args.out / "trajectory.txt", timestamps, odometry.poses)
+    lines = section_head(
+        "fused_tsdf_odometry",
+        device,
+        (load_start, load_average()),
+        command_line("benchmarks/fused_tsdf_odometry.py", argv),
+        f"{args.data}, frames 0-{args.frames - 1}",
+        note=args.note or None,
+    )
+    lines += [
+        f"- voxel TSDF: {args.voxel:g} m voxels, a {args.extent:g} m cube, truncation "
+        "from the config's field.truncation; tracker: the config's tracking.sdf and border",
+        "",
+        "| frames | ATE RMSE | Sim(3) ATE | Sim(3) scale | failed frames | s/frame |",
+        "|---:|---:|---:|---:|---:|---:|",
+    ]
+    if truth is None:
+        ate = sim3 = scale = "n/a (no ground truth)"
+    else:
+        rigid = absolute_trajectory_error(odometry.poses, truth)
+        similar = absolute_trajectory_error(odometry.poses, truth, with_scale=True)
+        ate, sim3 = f"{100 * rigid.rmse:.2f} cm", f"{100 * similar.rmse:.2f} cm"
+        scale = f"{similar.alignment.scale:.4f}"
+    lines += [
+        f"| {args.frames} | {ate} | {sim3} | {scale} | {len(odometry.failed)} "
+        f"| {odometry.seconds_per_frame:.2f} |",
+        "",
+    ]
+    publish("\n".join(lines), args.docs, args.no_append)
+
+
+if __name__ == "__main__":
+    main()

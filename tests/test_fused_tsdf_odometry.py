@@ -1,0 +1,88 @@
+"""benchmarks/fused_tsdf_odometry.py: the voxel TSDF it fuses, and that its odometry tracks."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from eslam.evaluate.trajectory import absolute_trajectory_error
+from eslam.io.trajectory import read_trajectory
+from eslam.synthetic import SynthConfig, generate_sequence
+from eslam.testing import write_sevenscenes_sequence
+from eslam.testing.scripts import load_script
+from eslam.types import Intrinsics
+
+SCRIPT = Path(__file__).resolve().parents[1] / "benchmarks" / "fused_tsdf_odometry.py"
+CONFIG = Path(__file__).resolve().parents[1] / "configs" / "sevenscenes" / "redkitchen.yaml"
+CAMERA = Intrinsics(width=40, height=30, fx=300.0, fy=300.0, cx=20.0, cy=15.0)
+TRUNCATION = 0.06
+PLANE = 2.0
+
+
+@pytest.fixture(scope="module")
+def script():
+    return load_script(SCRIPT)
+
+
+def _plane_volume(script, fusions: int):
+    """A volume around a wall PLANE metres in front of a camera at the origin, fused
+    ``fusions`` times from there."""
+    volume = script.empty_volume(torch.tensor([0.0, 0.0, PLANE]), 0.6, 0.02, TRUNCATION)
+    depth = torch.full((CAMERA.height, CAMERA.width), PLANE)
+    for _ in range(fusions):
+        script.fuse(volume, depth, CAMERA, torch.eye(4))
+    return volume
+
+
+def test_fused_wall_reads_the_projective_tsdf(script) -> None:
+    volume = _plane_volume(script, fusions=2)
+    z = torch.tensor([PLANE - 0.03, PLANE, PLANE + 0.03, PLANE - 0.2, PLANE + 0.2])
+    points = torch.stack((torch.zeros(5), torch.zeros(5), z), dim=-1)
+    sdf = volume.query(points).sdf
+    # In the band: (D - z) / T; in front: free space (1); behind the band: never seen (1).
+    expected = torch.tensor([0.5, 0.0, -0.5, 1.0, script.UNSEEN])
+    torch.testing.assert_close(sdf, expected, atol=1e-5, rtol=0)
+    # Each fusion counts once where it observes, and nowhere outside the camera's view.
+    assert volume.weights.max().item() == 2.0
+    beside = torch.tensor([[0.25, 0.0, PLANE - 0.03]])  # the view ends 0.13 m to the side
+    assert volume.query(beside).sdf.item() == script.UNSEEN
+    with pytest.raises(ValueError, match="colour_weight"):
+        volume.query(points, with_rgb=True)
+
+
+def test_a_view_that_misses_the_volume_changes_nothing(script) -> None:
+    volume = _plane_volume(script, fusions=1)
+    before = volume.values.clone()
+    away = torch.eye(4)
+    away[:3, :3] = torch.diag(torch.tensor([-1.0, 1.0, -1.0]))  # looking back, away from the wall
+    away[2, 3] = -0.5
+    script.fuse(volume, torch.full((CAMERA.height, CAMERA.width), PLANE), CAMERA, away)
+    assert torch.equal(volume.values, before)
+
+
+def test_odometry_follows_the_camera(script, tmp_path: Path) -> None:
+    """Against a camera that stands still at the first pose (a tracker that does not
+    move), the odometry's ATE must be far smaller; its trajectory file is the run's."""
+    frames = list(generate_sequence(SynthConfig(frames=10, width=160, height=120, seed=3)))
+    write_sevenscenes_sequence(tmp_path / "seq", frames)
+    truth = np.stack([frame.pose_gt for frame in frames])
+    odometry, reference, _ = script.fused_tsdf_odometry(
+        CONFIG, tmp_path / "seq", 10, voxel=0.03, extent=6.0, device=torch.device("cpu")
+    )
+    np.testing.assert_allclose(reference, truth)
+    assert odometry.failed == []
+    tracked = absolute_trajectory_error(odometry.poses, truth).rmse
+    standing = absolute_trajectory_error(np.repeat(truth[:1], 10, axis=0), truth).rmse
+    assert standing > 0.02
+    assert tracked < 0.003 and tracked < standing / 10
+    script.main(
+        ["--config", str(CONFIG), "--data", str(tmp_path / "seq"), "--frames", "4",
+         "--out", str(tmp_path / "run"), "--voxel", "0.03", "--device", "cpu", "--no-append"]
+    )  # fmt: skip
+    _, written = read_trajectory(tmp_path / "run")
+    assert written.shape == (4, 4, 4)
+    with pytest.raises(SystemExit, match=r"--frames must be in 2\.\.10"):
+        script.fused_tsdf_odometry(CONFIG, tmp_path / "seq", 11, 0.03, 6.0, torch.device("cpu"))
