@@ -178,9 +178,9 @@ def extrapolate_constant_velocity(pose_prev: torch.Tensor, pose_curr: torch.Tens
     quaternion + translation 7-vector linearly; we extrapolate on SE(3), which keeps
     the result a rigid transform and is exact for a constant-twist trajectory. The
     product R_k R_(k-1)^T R_k multiplies an orthonormality error of its inputs by about
-    2.4 (float32 rounding reaches 1e-2 after ~15 frames of prediction on predictions, as
-    after failed frames, and overflows after ~25), so the rotation is pulled back onto
-    SO(3) (:func:`renormalise_rotation`).
+    2.4, and a tracker that corrects the prediction by exp(xi) T (the SDF tracker)
+    passes it on: float32 rounding reached 1e-2 after ~15 frames and overflowed after
+    ~25. So the rotation is pulled back onto SO(3) (:func:`renormalise_rotation`).
 
     Args:
         pose_prev: (..., 4, 4) camera-to-world pose of frame k - 1.

@@ -430,10 +430,11 @@ def test_constant_velocity_extrapolation_reproduces_constant_twist() -> None:
 
 
 def test_constant_velocity_prediction_of_predictions_stays_rigid() -> None:
-    """Frames kept at the motion model's pose (failed frames) are predicted from
-    predictions: R_k R_(k-1)^T R_k multiplied float32's orthonormality error by ~2.4 a
-    frame, so without pulling the rotation back onto SO(3) it passed 1 after ~20 frames
-    and overflowed after ~25; each prediction must stay a rotation and keep its speed."""
+    """Predictions from poses that were predictions (corrected by exp(xi) T, as the
+    SDF tracker does): R_k R_(k-1)^T R_k multiplied float32's orthonormality error by
+    ~2.4 a frame, so without pulling the rotation back onto SO(3) it passed 1 after ~20
+    frames and overflowed after ~25; each prediction must stay a rotation and keep its
+    speed."""
     step = se3_exp(torch.tensor([0.007, 0.001, 0.002, 0.003, 0.005, 0.001]))
     poses = [torch.eye(4), step]
     for _ in range(60):

@@ -20,6 +20,7 @@ from eslam.config import DataConfig, load_config
 from eslam.data import open_sequence
 from eslam.data.source import IterableSource
 from eslam.errors import ConfigError, RunInterrupted, RunStopped
+from eslam.geometry.pose import se3_exp
 from eslam.io.checkpoint import load_checkpoint
 from eslam.io.trajectory import read_tum_trajectory
 from eslam.slam.loop import run_slam
@@ -244,6 +245,50 @@ def test_a_failed_frame_keeps_the_prediction_and_is_no_keyframe(
     )
     # no failed frame kept the far pose: every estimate stays near the ground truth
     assert result.metrics["ate_rmse_cm"] < 5.0
+
+
+class KeepsThePrediction:
+    """Moves the camera by a fixed small twist on the first frame it tracks, then finds
+    every frame where the motion model predicted it, as a tracker that updates the
+    prediction by exp(xi) T (the SDF tracker) does when its step is zero."""
+
+    STEP = torch.tensor([0.007, 0.001, 0.002, 0.003, 0.005, 0.001])
+
+    def __init__(self, config) -> None:
+        self.calls = 0
+
+    def track(self, field, view, initial_pose, generator):
+        self.calls += 1
+        pose = se3_exp(self.STEP.to(initial_pose)) @ initial_pose
+        if self.calls > 1:
+            pose = se3_exp(torch.zeros_like(self.STEP).to(initial_pose)) @ initial_pose
+        return TrackingResult(pose, torch.zeros(()), TrackingQuality(3, 0.9, 0.005, False))
+
+
+def test_a_run_of_predicted_poses_stays_rigid(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Each prediction extrapolates two poses that were predictions too: over 40 frames
+    they must stay rigid and keep the first step's motion (the product R_k R_(k-1)^T R_k
+    once multiplied float32's orthonormality error by ~2.4 a frame, and the `sdf`
+    tracker lost the track to it after 26-35 frames)."""
+    from eslam.synthetic import SynthConfig, write_synthetic_sequence
+
+    frames = 44
+    write_synthetic_sequence(tmp_path / "data", SynthConfig(frames=frames, width=40, height=30))
+    monkeypatch.setitem(TRACKERS, "predicted", KeepsThePrediction)
+    # mapping must not refine the poses: they are made up, not what the images show
+    config = tiny_config(tmp_path / "data", "output.mesh=false", "mapping.optimise_poses=false")
+    config = dataclasses.replace(
+        config, tracking=dataclasses.replace(config.tracking, method="predicted")
+    )
+    result = run_slam(config, tmp_path / "run")
+    poses = result.poses  # as the loop held them, not as written
+    assert np.isfinite(poses).all()
+    gram = poses[:, :3, :3] @ poses[:, :3, :3].transpose(0, 2, 1)
+    assert np.abs(gram - np.eye(3)).max() < 1e-5
+    steps = np.linalg.inv(poses[1:-1]) @ poses[2:]
+    np.testing.assert_allclose(steps, np.broadcast_to(steps[0], steps.shape), atol=1e-4)
 
 
 def test_hybrid_lr_factor_scales_only_the_render_stage() -> None:
