@@ -12,6 +12,9 @@ Cases (each a run folder under ``--out``):
   with the paper's settings.
 - ``demo``: the synthetic demo scene (``eslam demo``'s, written under ``--out`` once)
   with the demo's CPU preset.
+- ``corridor``: the same camera path, frames and preset in the empty synthetic
+  corridor (``eslam synth --scene corridor``): walls, floor and ceiling only, so the
+  geometry leaves the motion along it open wherever no end wall is in view.
 
 ``--methods render sdf hybrid`` runs every case once per tracker (``tracking.method``);
 the table then also gives the Sim(3) scale, the relative pose error between consecutive
@@ -39,7 +42,7 @@ import os
 import statistics
 import sys
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import torch
@@ -90,18 +93,26 @@ CASES = (
     Case("room0-cpu", "replica/room0_cpu.yaml", "replica-room0", None),
     Case("room0-paper", "replica/room0.yaml", "replica-room0", None),
     Case("demo", "demo.yaml", "", None),
+    Case("corridor", "demo.yaml", "", None),
 )
-"""Every case; ``demo`` reads the synthetic demo scene written under ``--out``."""
+"""Every case; ``demo`` reads the synthetic demo scene written under ``--out``, and
+``corridor`` the same camera, frames and settings in the empty synthetic corridor
+(``eslam.synthetic.corridor``: views where geometry leaves the motion along it open)."""
+
+SYNTHETIC = ("demo", "corridor")
+"""The cases on a synthetic scene (written under ``--out``, no data root)."""
 
 
-def demo_overrides(out: Path) -> list[str]:
-    """data.path and scene.bound of the demo scene (written to ``out/demo-data`` once)."""
+def synthetic_overrides(out: Path, name: str) -> list[str]:
+    """data.path and scene.bound of case ``name``'s synthetic scene (written to
+    ``out/NAME-data`` once): the demo's sequence, in the room or the corridor."""
     from eslam.synthetic import read_synthetic_bound, write_synthetic_sequence
     from eslam.workflows.demo import DEMO_SCENE
 
-    data = out / "demo-data"
+    scene = "room" if name == "demo" else name
+    data = out / f"{name}-data"
     if not (data / "synth.json").is_file():
-        write_synthetic_sequence(data, DEMO_SCENE, overwrite=True)
+        write_synthetic_sequence(data, replace(DEMO_SCENE, scene=scene), overwrite=True)
     return [f"data.path={data}", f"scene.bound={read_synthetic_bound(data)}"]
 
 
@@ -117,8 +128,8 @@ def run_case(case: Case, method: str, args: argparse.Namespace) -> Row:
     """Run ``case`` with ``method`` into ``args.out/case.name[-method]``; return its metrics."""
     out = args.out / (case.name if args.methods is None else f"{case.name}-{method}")
     data = (
-        demo_overrides(args.out)
-        if case.name == "demo"
+        synthetic_overrides(args.out, case.name)
+        if case.name in SYNTHETIC
         else [f"data.path={args.data_root / case.data}"]
     )
     overrides = [
@@ -258,7 +269,8 @@ def main(argv: list[str] | None = None) -> None:
         (load_start, load_average()),
         command,
         "../shared/data (7-Scenes redkitchen frames 0-399, Replica room0 frames 0-19) "
-        "or the synthetic demo scene; no mesh; FPT = tracking + mapping wall time / frames",
+        "or the synthetic demo scene or corridor; no mesh; "
+        "FPT = tracking + mapping wall time / frames",
         ("overrides on every case", args.overrides),
         args.note,
     )

@@ -6,10 +6,14 @@ from collections.abc import Callable
 
 import numpy as np
 
+from eslam.synthetic.corridor import build_corridor
 from eslam.synthetic.primitives import RoomBox, Scene
 from eslam.synthetic.room import build_room
 
-SCENES: dict[str, Callable[[np.random.Generator], Scene]] = {"room": build_room}
+SCENES: dict[str, Callable[[np.random.Generator], Scene]] = {
+    "room": build_room,
+    "corridor": build_corridor,
+}
 """Scene builders by name; each takes a seeded numpy Generator."""
 
 

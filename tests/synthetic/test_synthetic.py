@@ -75,9 +75,25 @@ def _ray_mesh_depth(mesh, origin: np.ndarray, directions: np.ndarray) -> np.ndar
 def test_unknown_scene_lists_choices() -> None:
     with pytest.raises(ValueError, match="room"):
         SynthConfig(scene="castle")
-    with pytest.raises(ValueError, match="choose one of: room"):
+    with pytest.raises(ValueError, match="choose one of: corridor, room"):
         build_scene("castle", 0)
     assert "room" in SCENES
+
+
+def test_the_corridor_is_a_long_empty_box_the_camera_stays_inside() -> None:
+    """Its views are planes only: no object, the camera box well inside, depth on every
+    pixel (a closed box) and never nearer than its 0.8 m walls allow."""
+    scene = build_scene("corridor", 2)
+    (corridor,) = scene.primitives
+    assert np.all(scene.camera_lo > corridor.lo + 0.7) and np.all(scene.camera_hi < corridor.hi)
+    length, width = corridor.hi[:2] - corridor.lo[:2]
+    assert length > 3.5 * width
+    assert json.dumps(describe_scene(scene))
+    config = SynthConfig(frames=5, width=40, height=30, seed=2, scene="corridor")
+    for frame in generate_sequence(config):
+        position = frame.pose_gt[:3, 3]
+        assert np.all(position >= scene.camera_lo) and np.all(position <= scene.camera_hi)
+        assert frame.depth.min() > 0.5
 
 
 def test_bad_config_values_raise() -> None:
