@@ -27,23 +27,31 @@ def script():
     return load_script(SCRIPT)
 
 
-def _plane_volume(script, fusions: int):
-    """A volume around a wall PLANE metres in front of a camera at the origin, fused
-    ``fusions`` times from there."""
-    volume = script.empty_volume(torch.tensor([0.0, 0.0, PLANE]), 0.6, 0.02, TRUNCATION)
+def _wall_depth() -> torch.Tensor:
+    """A wall PLANE metres ahead on the image's left half (x < 0), 0.25 m further on the
+    right half (a step)."""
     depth = torch.full((CAMERA.height, CAMERA.width), PLANE)
+    depth[:, CAMERA.width // 2 :] += 0.25
+    return depth
+
+
+def _plane_volume(script, fusions: int):
+    """A volume around the wall of :func:`_wall_depth`, fused ``fusions`` times from a
+    camera at the origin."""
+    volume = script.empty_volume(torch.tensor([0.0, 0.0, PLANE]), 0.6, 0.02, TRUNCATION)
     for _ in range(fusions):
-        script.fuse(volume, depth, CAMERA, torch.eye(4))
+        script.fuse(volume, _wall_depth(), CAMERA, torch.eye(4))
     return volume
 
 
 def test_fused_wall_reads_the_projective_tsdf(script) -> None:
     volume = _plane_volume(script, fusions=2)
-    z = torch.tensor([PLANE - 0.03, PLANE, PLANE + 0.03, PLANE - 0.2, PLANE + 0.2])
-    points = torch.stack((torch.zeros(5), torch.zeros(5), z), dim=-1)
+    near = [PLANE - 0.03, PLANE, PLANE + 0.03, PLANE - 0.2, PLANE + 0.2]
+    points = torch.tensor([[-0.05, 0.0, z] for z in near] + [[0.05, 0.0, PLANE + 0.22]])
     sdf = volume.query(points).sdf
-    # In the band: (D - z) / T; in front: free space (1); behind the band: never seen (1).
-    expected = torch.tensor([0.5, 0.0, -0.5, 1.0, script.UNSEEN])
+    # In the band: (D - z) / T; in front: free space (1); behind the band: never seen
+    # (also behind the near half, where the far half's depth takes the fusion further).
+    expected = torch.tensor([0.5, 0.0, -0.5, 1.0, script.UNSEEN, 0.5])
     torch.testing.assert_close(sdf, expected, atol=1e-5, rtol=0)
     # Each fusion counts once where it observes, and nowhere outside the camera's view.
     assert volume.weights.max().item() == 2.0
@@ -59,7 +67,7 @@ def test_a_view_that_misses_the_volume_changes_nothing(script) -> None:
     away = torch.eye(4)
     away[:3, :3] = torch.diag(torch.tensor([-1.0, 1.0, -1.0]))  # looking back, away from the wall
     away[2, 3] = -0.5
-    script.fuse(volume, torch.full((CAMERA.height, CAMERA.width), PLANE), CAMERA, away)
+    script.fuse(volume, _wall_depth(), CAMERA, away)
     assert torch.equal(volume.values, before)
 
 
