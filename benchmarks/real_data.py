@@ -12,9 +12,10 @@ Cases (each a run folder under ``--out``):
   with the paper's settings.
 - ``demo``: the synthetic demo scene (``eslam demo``'s, written under ``--out`` once)
   with the demo's CPU preset.
-- ``corridor``: the same camera path, frames and preset in the empty synthetic
-  corridor (``eslam synth --scene corridor``): walls, floor and ceiling only, so the
-  geometry leaves the motion along it open wherever no end wall is in view.
+- ``corridor``: the demo's camera and preset for 240 frames in the empty synthetic
+  corridor (``eslam synth --scene corridor``): walls, floor and ceiling only; from about
+  frame 90 the camera sees one side wall and the floor, and the geometry leaves the
+  motion along the corridor open.
 
 ``--methods render sdf hybrid`` runs every case once per tracker (``tracking.method``);
 the table then also gives the Sim(3) scale, the relative pose error between consecutive
@@ -93,26 +94,31 @@ CASES = (
     Case("room0-cpu", "replica/room0_cpu.yaml", "replica-room0", None),
     Case("room0-paper", "replica/room0.yaml", "replica-room0", None),
     Case("demo", "demo.yaml", "", None),
-    Case("corridor", "demo.yaml", "", None),
+    Case("corridor", "demo.yaml", "", 240),
 )
 """Every case; ``demo`` reads the synthetic demo scene written under ``--out``, and
-``corridor`` the same camera, frames and settings in the empty synthetic corridor
-(``eslam.synthetic.corridor``: views where geometry leaves the motion along it open)."""
+``corridor`` the demo's camera and settings for 240 frames in the empty synthetic
+corridor (``eslam.synthetic.corridor``): the camera's yaw turns by 120 degrees, and
+from about frame 90 on it sees one side wall and the floor only, views whose geometry
+leaves the motion along the corridor open."""
 
 SYNTHETIC = ("demo", "corridor")
 """The cases on a synthetic scene (written under ``--out``, no data root)."""
 
 
-def synthetic_overrides(out: Path, name: str) -> list[str]:
-    """data.path and scene.bound of case ``name``'s synthetic scene (written to
-    ``out/NAME-data`` once): the demo's sequence, in the room or the corridor."""
+def synthetic_overrides(out: Path, case: Case) -> list[str]:
+    """data.path and scene.bound of ``case``'s synthetic scene (written to
+    ``out/NAME-data`` once): the demo's sequence, in the room or the corridor, with
+    ``case.frames`` frames (the demo's 60 when None)."""
     from eslam.synthetic import read_synthetic_bound, write_synthetic_sequence
     from eslam.workflows.demo import DEMO_SCENE
 
-    scene = "room" if name == "demo" else name
-    data = out / f"{name}-data"
+    scene = "room" if case.name == "demo" else case.name
+    frames = case.frames or DEMO_SCENE.frames
+    data = out / f"{case.name}-data"
     if not (data / "synth.json").is_file():
-        write_synthetic_sequence(data, replace(DEMO_SCENE, scene=scene), overwrite=True)
+        synth = replace(DEMO_SCENE, scene=scene, frames=frames)
+        write_synthetic_sequence(data, synth, overwrite=True)
     return [f"data.path={data}", f"scene.bound={read_synthetic_bound(data)}"]
 
 
@@ -128,7 +134,7 @@ def run_case(case: Case, method: str, args: argparse.Namespace) -> Row:
     """Run ``case`` with ``method`` into ``args.out/case.name[-method]``; return its metrics."""
     out = args.out / (case.name if args.methods is None else f"{case.name}-{method}")
     data = (
-        synthetic_overrides(args.out, case.name)
+        synthetic_overrides(args.out, case)
         if case.name in SYNTHETIC
         else [f"data.path={args.data_root / case.data}"]
     )
