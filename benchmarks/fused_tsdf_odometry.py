@@ -193,12 +193,14 @@ def fused_tsdf_odometry(
     extent: float,
     device: torch.device,
     seed: int = 0,
+    overrides: tuple[str, ...] = (),
 ) -> tuple[Odometry, np.ndarray | None, np.ndarray]:
     """Track the first ``frames`` frames of ``data`` against a TSDF fused from them
     (module doc); the volume is a cube of side ``extent`` centred ``extent / 2 - 1`` m
-    in front of the first camera. Returns the odometry, the ground truth poses (or None)
-    and the timestamps."""
-    config = load_config(config_path, [f"data.path={data}", "data.register_colour=false"])
+    in front of the first camera; ``overrides`` (``key=value``) apply to the config.
+    Returns the odometry, the ground truth poses (or None) and the timestamps."""
+    given = [f"data.path={data}", "data.register_colour=false", *overrides]
+    config = load_config(config_path, given)
     sequence = open_sequence(config.data)
     if frames < 2 or frames > len(sequence):
         raise SystemExit(f"{data}: --frames must be in 2..{len(sequence)}, got {frames}")
@@ -253,6 +255,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--docs", type=Path, default=DEFAULT_DOCS)
     parser.add_argument("--no-append", action="store_true")
     parser.add_argument("--note", default="")
+    parser.add_argument("overrides", nargs="*", metavar="key=value", help="config overrides")
     args = parser.parse_args(argv)
     if args.voxel <= 0 or args.extent <= 2 * args.voxel or args.threads < 0:
         parser.error("--voxel must be > 0, --extent > 2 voxels, --threads >= 0")
@@ -267,7 +270,14 @@ def main(argv: list[str] | None = None) -> None:
     device = torch.device(args.device)
     load_start = load_average()
     odometry, truth, timestamps = fused_tsdf_odometry(
-        args.config, args.data, args.frames, args.voxel, args.extent, device, args.seed
+        args.config,
+        args.data,
+        args.frames,
+        args.voxel,
+        args.extent,
+        device,
+        args.seed,
+        tuple(args.overrides),
     )
     args.out.mkdir(parents=True, exist_ok=True)
     write_tum_trajectory(args.out / "trajectory.txt", timestamps, odometry.poses)
@@ -277,7 +287,8 @@ def main(argv: list[str] | None = None) -> None:
         (load_start, load_average()),
         command_line("benchmarks/fused_tsdf_odometry.py", argv),
         f"{args.data}, frames 0-{args.frames - 1}",
-        note=args.note or None,
+        ("overrides", args.overrides),
+        args.note or None,
     )
     lines += [
         f"- voxel TSDF: {args.voxel:g} m voxels, a {args.extent:g} m cube, truncation "

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 import torch
 
+from eslam.errors import ConfigError
 from eslam.evaluate.trajectory import absolute_trajectory_error
 from eslam.io.trajectory import read_trajectory
 from eslam.synthetic import SynthConfig, generate_sequence
@@ -71,7 +72,7 @@ def test_a_view_that_misses_the_volume_changes_nothing(script) -> None:
     assert torch.equal(volume.values, before)
 
 
-def test_odometry_follows_the_camera(script, tmp_path: Path) -> None:
+def test_odometry_follows_the_camera(script, tmp_path: Path, capsys) -> None:
     """Against a camera that stands still at the first pose (a tracker that does not
     move), the odometry's ATE must be far smaller; its trajectory file is the run's."""
     frames = list(generate_sequence(SynthConfig(frames=10, width=160, height=120, seed=3)))
@@ -88,9 +89,16 @@ def test_odometry_follows_the_camera(script, tmp_path: Path) -> None:
     assert tracked < 0.003 and tracked < standing / 10
     script.main(
         ["--config", str(CONFIG), "--data", str(tmp_path / "seq"), "--frames", "4",
-         "--out", str(tmp_path / "run"), "--voxel", "0.03", "--device", "cpu", "--no-append"]
+         "--out", str(tmp_path / "run"), "--voxel", "0.03", "--device", "cpu", "--no-append",
+         "tracking.sdf.levels=[500]"]
     )  # fmt: skip
+    assert "- overrides: `tracking.sdf.levels=[500]`" in capsys.readouterr().out
     _, written = read_trajectory(tmp_path / "run")
     assert written.shape == (4, 4, 4)
+    with pytest.raises(ConfigError, match="robust_scale"):  # overrides reach the config
+        script.fused_tsdf_odometry(
+            CONFIG, tmp_path / "seq", 4, 0.03, 6.0, torch.device("cpu"), 0,
+            ("tracking.sdf.robust_scale=0",),
+        )  # fmt: skip
     with pytest.raises(SystemExit, match=r"--frames must be in 2\.\.10"):
         script.fused_tsdf_odometry(CONFIG, tmp_path / "seq", 11, 0.03, 6.0, torch.device("cpu"))
