@@ -271,6 +271,7 @@ def test_counts_are_checked_at_load_naming_the_key(override: str, least: int) ->
         ("output.mesh_resolution=0", "0.0"),
         ("scene.max_extent=.nan", "nan"),
         ("render.surface_band=.nan", "nan"),
+        ("tracking.sdf.degeneracy=.nan", "nan"),
     ],
 )
 def test_checks_name_one_key_and_its_value(override: str, got: str) -> None:

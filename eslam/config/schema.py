@@ -341,8 +341,7 @@ class SdfTrackerConfig:
         reference = self.noise_reference_depth
         if reference is not None and not reference > 0:
             raise ValueError(f"noise_reference_depth must be > 0 metres or null, got {reference}")
-        if self.colour_weight < 0:
-            raise ValueError(f"colour_weight must be >= 0, got {self.colour_weight}")
+        _at_least(self, "colour_weight", 0)
         _positive(self, "colour_robust_scale")
         if not self.levels or min(self.levels) < 6 or list(self.levels) != sorted(self.levels):
             raise ValueError(f"levels must be increasing point counts >= 6, got {self.levels}")
@@ -350,8 +349,7 @@ class SdfTrackerConfig:
         _positive(self, "robust_scale", " metres")
         if not 0 < self.max_sdf <= 1:
             raise ValueError(f"max_sdf must be in (0, 1], got {self.max_sdf}")
-        if self.degeneracy < 0:
-            raise ValueError(f"degeneracy must be >= 0, got {self.degeneracy}")
+        _at_least(self, "degeneracy", 0)
         if not 0 <= self.min_inlier_fraction < 1:
             raise ValueError(
                 f"min_inlier_fraction must be in [0, 1), got {self.min_inlier_fraction}"
@@ -373,8 +371,7 @@ class HybridTrackerConfig:
     (docs/tracking.md)."""
 
     def __post_init__(self) -> None:
-        if self.render_iterations < 1:
-            raise ValueError(f"render_iterations must be >= 1, got {self.render_iterations}")
+        _at_least(self, "render_iterations", 1)
         _positive(self, "lr_factor")
 
 
