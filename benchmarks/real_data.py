@@ -79,6 +79,8 @@ class Case:
         data: sequence folder, relative to the data root.
         frames: frames to run (from frame 0), or None for all.
         budgeted: stop at the frame count that fits in the time budget.
+        synthetic: the synthetic scene (``eslam.synthetic.SCENES``) written under
+            ``--out`` instead of a sequence under the data root, or None.
     """
 
     name: str
@@ -86,6 +88,7 @@ class Case:
     data: str
     frames: int | None
     budgeted: bool = False
+    synthetic: str | None = None
 
 
 CASES = (
@@ -93,8 +96,8 @@ CASES = (
     Case("redkitchen-scannet", "sevenscenes/redkitchen.yaml", "7scenes-redkitchen", 400, True),
     Case("room0-cpu", "replica/room0_cpu.yaml", "replica-room0", None),
     Case("room0-paper", "replica/room0.yaml", "replica-room0", None),
-    Case("demo", "demo.yaml", "", None),
-    Case("corridor", "demo.yaml", "", 240),
+    Case("demo", "demo.yaml", "", None, synthetic="room"),
+    Case("corridor", "demo.yaml", "", 240, synthetic="corridor"),
 )
 """Every case; ``demo`` reads the synthetic demo scene written under ``--out``, and
 ``corridor`` the demo's camera and settings for 240 frames in the empty synthetic
@@ -102,22 +105,18 @@ corridor (``eslam.synthetic.corridor``): the camera's yaw turns by 120 degrees, 
 from about frame 90 on it sees one side wall and the floor only, views whose geometry
 leaves the motion along the corridor open."""
 
-SYNTHETIC = ("demo", "corridor")
-"""The cases on a synthetic scene (written under ``--out``, no data root)."""
-
 
 def synthetic_overrides(out: Path, case: Case) -> list[str]:
     """data.path and scene.bound of ``case``'s synthetic scene (written to
-    ``out/NAME-data`` once): the demo's sequence, in the room or the corridor, with
+    ``out/NAME-data`` once): the demo's camera in ``case.synthetic``, with
     ``case.frames`` frames (the demo's 60 when None)."""
     from eslam.synthetic import read_synthetic_bound, write_synthetic_sequence
     from eslam.workflows.demo import DEMO_SCENE
 
-    scene = "room" if case.name == "demo" else case.name
     frames = case.frames or DEMO_SCENE.frames
     data = out / f"{case.name}-data"
     if not (data / "synth.json").is_file():
-        synth = replace(DEMO_SCENE, scene=scene, frames=frames)
+        synth = replace(DEMO_SCENE, scene=case.synthetic, frames=frames)
         write_synthetic_sequence(data, synth, overwrite=True)
     return [f"data.path={data}", f"scene.bound={read_synthetic_bound(data)}"]
 
@@ -135,7 +134,7 @@ def run_case(case: Case, method: str, args: argparse.Namespace) -> Row:
     out = args.out / (case.name if args.methods is None else f"{case.name}-{method}")
     data = (
         synthetic_overrides(args.out, case)
-        if case.name in SYNTHETIC
+        if case.synthetic is not None
         else [f"data.path={args.data_root / case.data}"]
     )
     overrides = [
