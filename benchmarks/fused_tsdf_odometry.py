@@ -46,7 +46,7 @@ from _machine import (
 from eslam.config import load_config
 from eslam.data import open_sequence
 from eslam.evaluate.trajectory import absolute_trajectory_error
-from eslam.geometry.camera import project_points
+from eslam.geometry.camera import pixels_to_camera_directions, project_points
 from eslam.geometry.pose import extrapolate_constant_velocity
 from eslam.io.trajectory import write_tum_trajectory
 from eslam.render.rays import camera_directions
@@ -123,14 +123,7 @@ def frustum_block(
          [intrinsics.width, intrinsics.height]],
         dtype=c2w.dtype, device=c2w.device,
     )  # fmt: skip
-    rays = torch.stack(
-        (
-            (corners[:, 0] - intrinsics.cx) / intrinsics.fx,
-            (corners[:, 1] - intrinsics.cy) / intrinsics.fy,
-            torch.ones(4, dtype=c2w.dtype, device=c2w.device),
-        ),
-        dim=-1,
-    )
+    rays = pixels_to_camera_directions(corners, intrinsics)
     camera_points = torch.cat((torch.zeros(1, 3, dtype=c2w.dtype, device=c2w.device), far * rays))
     world = camera_points @ c2w[:3, :3].T + c2w[:3, 3]
     low = torch.floor((world.min(dim=0).values - volume.origin) / volume.voxel).long()
