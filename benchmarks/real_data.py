@@ -191,8 +191,9 @@ def table(rows: list[Row], methods: bool) -> str:
     if methods:
         lines = [
             "| case | tracker | frames | ATE RMSE (cm) | Sim(3) scale | RPE (mm, deg) "
-            "| tracking (s/frame) | FPS | to first pose (s) | failed frames | peak memory (MB) |",
-            "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+            "| tracking (s/frame) | FPS | to first pose (s) | failed frames "
+            "| degenerate frames | peak memory (MB) |",
+            "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
         ]
         for row in rows:
             m = row.result.metrics
@@ -203,7 +204,7 @@ def table(rows: list[Row], methods: bool) -> str:
                 f"| {m.get('rpe_translation_rmse_mm', float('nan')):.2f}, "
                 f"{m.get('rpe_rotation_rmse_deg', float('nan')):.3f} | {tracking:.3f} "
                 f"| {fps:.3f} | {first_pose:.1f} | {m.get('tracking_failures', '-')} "
-                f"| {m['peak_memory_mb']:.0f} |"
+                f"| {m.get('tracking_degenerate_frames', '-')} | {m['peak_memory_mb']:.0f} |"
             )
         return "\n".join(lines) + "\n"
     lines = [

@@ -152,6 +152,7 @@ class RunLoop:
         self._frames_without_depth = 0
         self._total: int | None = None
         self._last_failed = False
+        self._degenerate_since: int | None = None
         self._before_mapping: tuple[dict[str, torch.Tensor], torch.Tensor] | None = None
         # no scene bound: one set too small is grown (or, growth off, warned about), a
         # matter of the bound and not of depth units
@@ -266,6 +267,7 @@ class RunLoop:
                 100.0 * quality.inlier_fraction,
                 1000.0 * quality.residual_m,
             )
+        self._report_degeneracy(index, quality)
         if state.field is None:
             self._create_field(frame, has_depth, pose)
         state.trajectory.append(pose, frame.timestamp, frame.pose_gt)
@@ -289,6 +291,31 @@ class RunLoop:
             mapping_s=done - done_tracking,
             frame=frame,
         )
+
+    def _report_degeneracy(self, index: int, quality: TrackingQuality | None) -> None:
+        """Log where a stretch of degenerate views begins and ends (not every frame)."""
+        degenerate = (
+            quality is not None and not quality.failed and bool(quality.degenerate_directions)
+        )
+        if degenerate and self._degenerate_since is None:
+            assert quality is not None
+            self._degenerate_since = index
+            self.log.warning(
+                "frame %d: the view pins the pose down in only %d of 6 directions (smallest"
+                " normalised information %.4f): along the rest the pose follows the motion"
+                " model and may drift unseen (tracking_degenerate_frames in metrics.json)",
+                index,
+                6 - int(quality.degenerate_directions or 0),
+                quality.information,
+            )
+        elif not degenerate and self._degenerate_since is not None:
+            self.log.info(
+                "frame %d: the view constrains the whole pose again (frames %d-%d were degenerate)",
+                index,
+                self._degenerate_since,
+                index - 1,
+            )
+            self._degenerate_since = None
 
     def _create_field(self, frame: Frame, has_depth: bool, pose: torch.Tensor) -> None:
         """Build the field from the first frame with depth, seen from frame 0's pose."""

@@ -36,16 +36,8 @@ from eslam.io.trajectory import write_tum_trajectory
 from eslam.slam.observers import FrameDone, RunEnd, RunObserverBase, RunStart
 from eslam.slam.progress import finite_ate_pairs
 from eslam.slam.resources import PeakMemory
-from eslam.slam.state import SLAMState, save_state
+from eslam.slam.state import TRACKING_COLUMNS, SLAMState, save_state
 from eslam.slam.stream_report import stream_metrics
-
-TRACKING_COLUMNS = (
-    "tracking_iterations",
-    "tracking_inlier_fraction",
-    "tracking_residual_m",
-    "tracking_failed",
-)
-"""timings.json's per-frame tracking-quality lists (trackers that judge themselves)."""
 
 
 @dataclass(frozen=True)
@@ -90,7 +82,8 @@ def speed_metrics(wall: WallTime, tracking_time: list[float]) -> dict:
 
 def run_metrics(state: SLAMState, device: str, peak_memory_mb: float) -> dict:
     """metrics.json of a run: frames, device, FPT, peak memory, with a self-judging tracker
-    the failed frames and mean iterations, and with ground truth the ATE.
+    the failed frames and mean iterations (and with its degeneracy test on, the frames
+    with a degenerate direction), and with ground truth the ATE.
 
     FPT (seconds per frame) = (sum of tracking and mapping times) / frames. The ATE
     (rigid alignment, cm) uses the frames whose estimate and ground truth are both finite;
@@ -103,11 +96,16 @@ def run_metrics(state: SLAMState, device: str, peak_memory_mb: float) -> dict:
         "fpt_s": float(np.sum(state.tracking_time) + np.sum(state.mapping_time)) / max(done, 1),
         "peak_memory_mb": peak_memory_mb,
     }
-    quality = np.asarray(state.tracking_quality, dtype=np.float64).reshape(-1, 4)
+    quality = np.asarray(state.tracking_quality, dtype=np.float64).reshape(
+        -1, len(TRACKING_COLUMNS)
+    )
     judged = np.isfinite(quality[:, 3])
     if judged.any():
         metrics["tracking_failures"] = int(quality[judged, 3].sum())
         metrics["tracking_iterations_mean"] = float(quality[judged, 0].mean())
+    tested = np.isfinite(quality[:, 5])  # frames whose tracker ran the degeneracy test
+    if tested.any():
+        metrics["tracking_degenerate_frames"] = int((quality[tested, 5] > 0).sum())
     gt = state.trajectory.gt_poses()
     if gt is not None:
         poses = state.trajectory.poses.detach().cpu().double().numpy()
@@ -266,7 +264,9 @@ class RunWriter(RunObserverBase):
             "tracking_s": list(state.tracking_time),
             "mapping_s": list(state.mapping_time),
         }
-        quality = np.asarray(state.tracking_quality, dtype=np.float64).reshape(-1, 4)
+        quality = np.asarray(state.tracking_quality, dtype=np.float64).reshape(
+            -1, len(TRACKING_COLUMNS)
+        )
         if np.isfinite(quality[:, 3]).any():  # per frame, null where not judged
             for key, column in zip(TRACKING_COLUMNS, quality.T, strict=True):
                 timings[key] = [None if np.isnan(v) else float(v) for v in column]

@@ -54,7 +54,12 @@ demo; docs/results.md).
 Each frame gets a quality figure: the inlier fraction (points inside the band with
 |r| at most the robust scale c) and the robust RMS residual of the inliers. A frame with
 too few inliers or too large a residual is reported as failed (the loop keeps the
-motion model's pose and makes it no keyframe).
+motion model's pose and makes it no keyframe). A view that fits the map but pins the
+pose down in fewer than six directions (one wall and the floor: sliding along both fits
+as well) fits as well as a good one, so the quality also holds the smallest eigenvalue
+of the normalised information and the number of directions below ``degeneracy``
+(:func:`constrained_directions`): such a frame is counted and logged as degenerate, not
+failed (its pose is measured along the other directions).
 """
 
 from __future__ import annotations
@@ -286,6 +291,19 @@ def constrained_directions(system: Linearisation, threshold: float) -> tuple[tor
     return from_centred @ (kept @ kept.T) @ to_centred, degenerate
 
 
+def information_figures(system: Linearisation, threshold: float) -> tuple[float, int | None]:
+    """(smallest eigenvalue of :func:`normalised_information`, directions below
+    ``threshold``) at a linearisation: how well its points pin the pose down (reads the
+    device). The count is None when ``threshold`` is 0 (no test); with no weighted point
+    the eigenvalue is NaN and all 6 directions count."""
+    counted = threshold > 0
+    if not bool(system.weight.sum() > 0):
+        return float("nan"), 6 if counted else None
+    eigenvalues, _ = normalised_information(system)
+    degenerate = int((eigenvalues < threshold).sum()) if counted else None
+    return float(eigenvalues[0]), degenerate
+
+
 def damped_step(system: Linearisation, damping: torch.Tensor) -> torch.Tensor:
     """(6,) xi solving (H + lambda diag(H) + eps I) xi = -g (float64; never raises)."""
     hessian = system.hessian
@@ -388,6 +406,7 @@ def track_sdf(
                 break
     assert system is not None
     inlier_fraction, residual = quality(system, config)
+    information, degenerate = information_figures(system, config.degeneracy)
     failed = (
         inlier_fraction < config.min_inlier_fraction
         or residual > config.max_residual
@@ -401,6 +420,8 @@ def track_sdf(
             inlier_fraction=inlier_fraction,
             residual_m=residual,
             failed=failed,
+            information=information,
+            degenerate_directions=degenerate,
         ),
     )
 

@@ -43,8 +43,8 @@ class SLAMState:
         window: the keyframe window strategy.
         generator: the run's random generator (on the run's device).
         tracking_time / mapping_time: seconds per processed frame.
-        tracking_quality: per processed frame, [iterations, inlier fraction, residual
-            (m), failed (1/0)] from trackers that judge themselves, NaNs otherwise.
+        tracking_quality: per processed frame, a row of :data:`TRACKING_COLUMNS` from
+            trackers that judge themselves, NaNs otherwise.
         last_mapped: whether the last processed frame needs no mapping at the end of the
             stream (it is a keyframe, or has no depth, or no frame was processed).
         bound_warned: whether the run warned about depth points outside the bound
@@ -117,16 +117,38 @@ class FrameMark:
     last_mapped: bool
 
 
+TRACKING_COLUMNS = (
+    "tracking_iterations",
+    "tracking_inlier_fraction",
+    "tracking_residual_m",
+    "tracking_failed",
+    "tracking_information",
+    "tracking_degenerate_directions",
+)
+"""The columns of :attr:`SLAMState.tracking_quality` (the fields of
+:class:`~eslam.slam.tracking.TrackingQuality`; failed as 1/0), also the names of
+timings.json's per-frame lists."""
+
+
 def quality_row(quality: TrackingQuality | None) -> list[float]:
     """A frame's :attr:`SLAMState.tracking_quality` row (NaNs without a judgement)."""
     if quality is None:
-        return [float("nan")] * 4
+        return [float("nan")] * len(TRACKING_COLUMNS)
     return [
         float(quality.iterations),
         quality.inlier_fraction,
         quality.residual_m,
         float(quality.failed),
+        quality.information,
+        float("nan") if quality.degenerate_directions is None else quality.degenerate_directions,
     ]
+
+
+def quality_rows(saved: list[list[float]]) -> list[list[float]]:
+    """Checkpointed quality rows at today's width: a map saved before the information
+    columns existed has 4 per row; the missing ones read NaN (not computed)."""
+    width = len(TRACKING_COLUMNS)
+    return [list(row) + [float("nan")] * (width - len(row)) for row in saved]
 
 
 def run_generator(config: ESLAMConfig, device: torch.device) -> torch.Generator:
@@ -204,7 +226,7 @@ def load_state(path: Path, config: ESLAMConfig, device: torch.device) -> SLAMSta
             generator=generator,
             tracking_time=list(saved["tracking_time"]),
             mapping_time=list(saved["mapping_time"]),
-            tracking_quality=[list(row) for row in saved["tracking_quality"]],
+            tracking_quality=quality_rows(saved["tracking_quality"]),
             last_mapped=bool(saved["last_mapped"]),
         )
     except (KeyError, RuntimeError, ValueError) as error:

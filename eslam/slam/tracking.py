@@ -54,12 +54,20 @@ class TrackingQuality:
         residual_m: robust RMS residual of the inliers, metres.
         failed: the tracker judged the pose unusable (the loop keeps the motion model's
             pose and makes the frame no keyframe).
+        information: the smallest eigenvalue of the points' normalised information at the
+            final pose (about 1 along a direction every point's normal sees, 0 along one
+            no point constrains: sliding along a wall); NaN where not computed.
+        degenerate_directions: pose directions below the tracker's degeneracy threshold
+            (along them the pose is the motion model's, not measured); None when the
+            tracker has no such test or it is off.
     """
 
     iterations: int
     inlier_fraction: float
     residual_m: float
     failed: bool
+    information: float = float("nan")
+    degenerate_directions: int | None = None
 
 
 @dataclass(frozen=True, eq=False)

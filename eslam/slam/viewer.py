@@ -16,6 +16,7 @@ for them); without a viewer nothing here is imported or called.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from typing import Protocol
 
@@ -78,7 +79,8 @@ def frame_scalars(done: FrameDone) -> dict[str, float]:
     """The numbers plotted per frame: tracking and mapping time (ms), the frames of the
     stream skipped so far (a real-time run's drops: the frame's position in its stream
     minus its position in the run; 0 otherwise) and, from trackers that judge themselves,
-    the inlier share and residual (mm). One entry per plot."""
+    the inlier share, residual (mm) and smallest normalised information (near 0: a
+    degenerate view). One entry per plot."""
     values = {
         "time/tracking_ms": 1000.0 * done.tracking_s,
         "time/mapping_ms": 1000.0 * done.mapping_s,
@@ -88,6 +90,8 @@ def frame_scalars(done: FrameDone) -> dict[str, float]:
     if done.quality is not None:
         values["tracking/inlier_fraction"] = float(done.quality.inlier_fraction)
         values["tracking/residual_mm"] = 1000.0 * float(done.quality.residual_m)
+        if math.isfinite(done.quality.information):
+            values["tracking/information"] = float(done.quality.information)
     return values
 
 

@@ -247,6 +247,68 @@ def test_a_failed_frame_keeps_the_prediction_and_is_no_keyframe(
     assert result.metrics["ate_rmse_cm"] < 5.0
 
 
+class DegenerateStretch:
+    """Tracks by the rendering tracker and reports frames 2-4 as seeing only 4 of the 6
+    pose directions (the others: all 6)."""
+
+    def __init__(self, config) -> None:
+        self.real = TRACKERS["render"](config)
+        self.calls = 0
+
+    def track(self, field, view, initial_pose, generator):
+        self.calls += 1  # call k tracks frame k
+        result = self.real.track(field, view, initial_pose, generator)
+        degenerate = 2 if 2 <= self.calls <= 4 else 0
+        information = 0.001 if degenerate else 0.1
+        quality = TrackingQuality(3, 0.95, 0.002, False, information, degenerate)
+        return TrackingResult(result.pose, result.loss, quality)
+
+
+def test_degenerate_views_are_counted_and_logged_once_per_stretch(
+    tiny_sequence: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setitem(TRACKERS, "degenerate", DegenerateStretch)
+    config = tiny_config(tiny_sequence, "output.mesh=false")
+    config = dataclasses.replace(
+        config, tracking=dataclasses.replace(config.tracking, method="degenerate")
+    )
+    result = run_slam(config, tmp_path / "run")
+    assert result.metrics["tracking_degenerate_frames"] == 3
+    assert result.metrics["tracking_failures"] == 0
+    timings = json.loads((tmp_path / "run" / "timings.json").read_text())
+    assert timings["tracking_degenerate_directions"][:6] == [None, 0.0, 2.0, 2.0, 2.0, 0.0]
+    assert timings["tracking_information"][2] == pytest.approx(0.001)
+    log = (tmp_path / "run" / "log.txt").read_text()
+    assert log.count("pins the pose down in only") == 1
+    assert "frame 2: the view pins the pose down in only 4 of 6 directions" in log
+    assert "frame 5: the view constrains the whole pose again (frames 2-4" in log
+
+
+def test_a_run_without_the_degeneracy_test_claims_no_count(tiny_run) -> None:
+    # the rendering tracker judges nothing: no count, not a count of 0
+    assert "tracking_degenerate_frames" not in tiny_run.metrics
+
+
+def test_a_map_saved_with_four_quality_columns_still_loads(
+    tiny_sequence: Path, tiny_run, tmp_path: Path
+) -> None:
+    from eslam.io.checkpoint import save_checkpoint
+    from eslam.slam.run_writer import run_metrics
+    from eslam.slam.state import TRACKING_COLUMNS, load_state
+
+    saved = load_checkpoint(tiny_run.run_dir / "map.pt", map_location="cpu")
+    rows = [[5.0, 0.9, 0.001, float(i == 3)] for i in range(TINY_FRAMES)]
+    old = tmp_path / "map.pt"
+    save_checkpoint(old, {**saved, "tracking_quality": rows})  # before the information columns
+    state = load_state(old, tiny_config(tiny_sequence), torch.device("cpu"))
+    assert all(len(row) == len(TRACKING_COLUMNS) for row in state.tracking_quality)
+    assert state.tracking_quality[3][:4] == [5.0, 0.9, 0.001, 1.0]
+    assert np.isnan(state.tracking_quality[3][4:]).all()  # not computed then
+    metrics = run_metrics(state, "cpu", 0.0)
+    assert metrics["tracking_failures"] == 1
+    assert "tracking_degenerate_frames" not in metrics
+
+
 class KeepsThePrediction:
     """Moves the camera by a fixed small twist on the first frame it tracks, then finds
     every frame where the motion model predicted it (the SDF tracker's exp(xi) T with a

@@ -221,6 +221,37 @@ def test_degenerate_directions_of_a_wall_are_found_and_held() -> None:
     offset = result.pose[:3, 3] - WALL_POSE[:3, 3]
     assert abs(float(offset[0])) < 0.001
     assert float(offset[1]) == pytest.approx(0.02, abs=1e-5)
+    # and the frame says so: it fits perfectly, yet three directions were not measured
+    assert result.quality is not None and not result.quality.failed
+    assert result.quality.inlier_fraction > 0.9
+    assert result.quality.degenerate_directions == 3
+    assert result.quality.information < 0.01
+
+
+@pytest.mark.parametrize("degeneracy", [0.0, 0.01])
+def test_a_view_of_the_whole_room_reports_no_degenerate_direction(view, degeneracy) -> None:
+    config = dataclasses.replace(SdfTrackerConfig(), degeneracy=degeneracy)
+    result = SdfTracker(config).track(
+        AnalyticField(), view, perturbed(0.01, 1.0, 0), torch.Generator().manual_seed(0)
+    )
+    assert result.quality is not None
+    assert result.quality.information > 0.02  # every direction seen by many normals
+    # the count is only made with the test on; off, nothing is claimed either way
+    assert result.quality.degenerate_directions == (0 if degeneracy > 0 else None)
+
+
+def test_the_wall_reports_its_information_with_the_test_off() -> None:
+    wall = make_view(
+        torch.zeros(CAMERA.height, CAMERA.width, 3),
+        render_depth(WALL_POSE),
+        camera_directions(CAMERA),
+        2,
+    )
+    result = SdfTracker(SdfTrackerConfig()).track(
+        AnalyticField(), wall, WALL_POSE, torch.Generator().manual_seed(0)
+    )
+    assert result.quality is not None and result.quality.degenerate_directions is None
+    assert result.quality.information < 1e-4  # the figure still shows the slide
 
 
 def textured_view(pose: torch.Tensor):

@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import dataclasses
 import subprocess
 import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 import torch
 
 from eslam.config import DataConfig, ViewerConfig, load_config
@@ -135,6 +137,21 @@ def test_without_a_viewer_option_nothing_of_the_viewer_is_imported() -> None:
         [sys.executable, "-c", code], capture_output=True, text=True, check=True, timeout=120
     )
     assert result.stdout.strip() == "[] []"
+
+
+def test_the_tracking_plots_show_the_information_where_the_tracker_computed_it():
+    from eslam.slam.tracking import TrackingQuality
+    from eslam.slam.viewer import frame_scalars
+
+    pose = torch.eye(4)
+    judged = TrackingQuality(4, 0.9, 0.002, False, information=0.003, degenerate_directions=1)
+    values = frame_scalars(FrameDone(1, pose, True, judged, False, 0.0, 0.0))
+    assert values["tracking/information"] == pytest.approx(0.003)
+    assert values["tracking/residual_mm"] == pytest.approx(2.0)
+    unknown = dataclasses.replace(judged, information=float("nan"))  # an old map's frames
+    assert "tracking/information" not in frame_scalars(
+        FrameDone(1, pose, True, unknown, False, 0.0, 0.0)
+    )
 
 
 def test_dropped_frames_are_the_stream_position_ahead_of_the_run_position(tiny_sequence):
