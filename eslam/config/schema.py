@@ -330,6 +330,11 @@ class SdfTrackerConfig:
     default: it made whole demo runs worse; docs/tracking.md)."""
     colour_robust_scale: float = 0.1
     """Scale of the robust loss on the colour residual, in colour units [0, 1]."""
+    colour_when: Literal["always", "degenerate"] = "always"
+    """With ``colour_weight`` > 0: ``always`` adds the photometric term on every frame;
+    ``degenerate`` only on frames whose geometry alone leaves a pose direction below
+    ``degeneracy`` at the motion model's guess (a wall, a corridor), so other frames
+    keep the geometric tracker's cost and result."""
     noise_reference_depth: float | None = None
     """Depth z0 (metres) at which a point's SDF residual keeps its size: each residual
     (and Jacobian row) is divided by (z / z0)^2, the quadratic growth of a depth
@@ -350,6 +355,11 @@ class SdfTrackerConfig:
         if not 0 < self.max_sdf <= 1:
             raise ValueError(f"max_sdf must be in (0, 1], got {self.max_sdf}")
         _at_least(self, "degeneracy", 0)
+        if self.colour_when == "degenerate" and self.colour_weight > 0 and self.degeneracy <= 0:
+            raise ValueError(
+                "colour_when: degenerate needs degeneracy > 0 (the test that finds those "
+                f"frames), got degeneracy {self.degeneracy}"
+            )
         if not 0 <= self.min_inlier_fraction < 1:
             raise ValueError(
                 f"min_inlier_fraction must be in [0, 1), got {self.min_inlier_fraction}"

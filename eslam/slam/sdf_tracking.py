@@ -49,7 +49,10 @@ counts rho(lambda) per channel in the cost) and its Jacobian rows are
 stacked into the same normal equations: H = J^T W J + sum_k J^cT_k W^c_k J^c_k, and
 likewise the gradient. Cost: the field is queried with colour, and autograd runs four
 backward passes (SDF and three channels) instead of one (3-5x the time per frame on the
-demo; docs/results.md).
+demo; docs/results.md). With ``colour_when: degenerate`` a frame starts geometric and
+adds the colour term only if its first linearisation (at the guess, coarsest level)
+has a direction below ``degeneracy`` (:func:`constrained_directions`): the views whose
+geometry cannot pin the pose get the texture, the others the geometric tracker as is.
 
 Each frame gets a quality figure: the inlier fraction (points inside the band with
 |r| at most the robust scale c) and the robust RMS residual of the inliers. A frame with
@@ -64,7 +67,7 @@ failed (its pose is measured along the other directions).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import torch
 
@@ -376,10 +379,19 @@ def track_sdf(
     pose = initial_pose.detach().clone()
     iterations = 0
     system = None
-    for count in config.levels:
+    # colour_when: degenerate starts geometric and adds colour if the first linearisation
+    # (at the guess, coarsest level) leaves a direction below the degeneracy threshold
+    settings = config
+    if colours is not None and config.colour_when == "degenerate":
+        settings = replace(config, colour_weight=0.0)
+    for level, count in enumerate(config.levels):
         level_points = points_cam[:count]
         level_colours = colours[:count] if colours is not None else None
-        system = linearise(field, level_points, pose, config, level_colours)
+        system = linearise(field, level_points, pose, settings, level_colours)
+        if level == 0 and settings is not config:
+            if information_figures(system, config.degeneracy)[1]:
+                settings = config
+                system = linearise(field, level_points, pose, settings, level_colours)
         damping = torch.tensor(config.damping, dtype=torch.float64, device=pose.device)
         for _ in range(config.iterations):
             if int(system.valid.sum()) < MIN_POINTS:
@@ -391,7 +403,7 @@ def track_sdf(
                 damping = damping * 4.0
                 continue
             candidate = se3_exp(step.to(pose.dtype)) @ pose
-            trial = linearise(field, level_points, candidate, config, level_colours)
+            trial = linearise(field, level_points, candidate, settings, level_colours)
             better = bool(trial.cost <= system.cost)
             if better:
                 pose, system = candidate, trial

@@ -355,6 +355,57 @@ def test_colour_term_recovers_the_slide_along_a_textured_wall() -> None:
     assert colour_turn < 0.1
 
 
+class CountsColourQueries(AnalyticField):
+    """The analytic field, counting the queries that decode colour."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.colour_queries = 0
+
+    def query(self, points: torch.Tensor, with_rgb: bool = True) -> FieldOutput:
+        self.colour_queries += int(with_rgb)
+        return super().query(points, with_rgb)
+
+
+DEGENERATE_COLOUR = SdfTrackerConfig(colour_weight=0.05, colour_when="degenerate", degeneracy=0.01)
+
+
+def test_colour_when_degenerate_turns_colour_on_for_a_wall() -> None:
+    wall = textured_view(WALL_POSE)
+    start = WALL_POSE.clone()
+    start[:3, 3] += torch.tensor([-0.02, 0.02, -0.015])
+    field = CountsColourQueries()
+    result = SdfTracker(DEGENERATE_COLOUR).track(
+        field, wall, start, torch.Generator().manual_seed(0)
+    )
+    assert field.colour_queries > 0
+    offset = result.pose[:3, 3] - WALL_POSE[:3, 3]
+    # the slide the geometry cannot see (kept whole with degeneracy alone) is found
+    assert float(offset.norm()) < 0.002, f"{offset.tolist()}"
+    assert result.quality is not None and not result.quality.failed
+
+
+def test_colour_when_degenerate_leaves_a_structured_view_to_the_geometry() -> None:
+    view = textured_view(TRUE_POSE)
+    start = perturbed(0.03, 3.0, 0)
+    field = CountsColourQueries()
+    chosen = SdfTracker(DEGENERATE_COLOUR).track(
+        field, view, start, torch.Generator().manual_seed(0)
+    )
+    geometric = SdfTracker(dataclasses.replace(DEGENERATE_COLOUR, colour_weight=0.0)).track(
+        AnalyticField(), view, start, torch.Generator().manual_seed(0)
+    )
+    assert field.colour_queries == 0  # not one colour decode: the geometric tracker's cost
+    assert torch.equal(chosen.pose, geometric.pose)
+    assert chosen.quality == geometric.quality
+
+
+def test_colour_when_degenerate_needs_the_degeneracy_test() -> None:
+    with pytest.raises(ValueError, match="colour_when: degenerate needs degeneracy > 0"):
+        SdfTrackerConfig(colour_weight=0.05, colour_when="degenerate")
+    SdfTrackerConfig(colour_when="degenerate")  # no colour term: nothing to choose
+
+
 def test_colour_term_needs_colour() -> None:
     class Colourless(AnalyticField):
         def query(self, points: torch.Tensor, with_rgb: bool = True) -> FieldOutput:
