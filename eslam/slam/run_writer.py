@@ -80,6 +80,12 @@ def speed_metrics(wall: WallTime, tracking_time: list[float]) -> dict:
     return metrics
 
 
+def quality_columns(state: SLAMState) -> dict[str, np.ndarray]:
+    """The state's per-frame tracking quality by column name (:data:`TRACKING_COLUMNS`)."""
+    rows = np.asarray(state.tracking_quality, dtype=np.float64).reshape(-1, len(TRACKING_COLUMNS))
+    return dict(zip(TRACKING_COLUMNS, rows.T, strict=True))
+
+
 def run_metrics(state: SLAMState, device: str, peak_memory_mb: float) -> dict:
     """metrics.json of a run: frames, device, FPT, peak memory, with a self-judging tracker
     the failed frames and mean iterations (and with its degeneracy test on, the frames
@@ -96,16 +102,16 @@ def run_metrics(state: SLAMState, device: str, peak_memory_mb: float) -> dict:
         "fpt_s": float(np.sum(state.tracking_time) + np.sum(state.mapping_time)) / max(done, 1),
         "peak_memory_mb": peak_memory_mb,
     }
-    quality = np.asarray(state.tracking_quality, dtype=np.float64).reshape(
-        -1, len(TRACKING_COLUMNS)
-    )
-    judged = np.isfinite(quality[:, 3])
+    quality = quality_columns(state)
+    failed = quality["tracking_failed"]
+    judged = np.isfinite(failed)
     if judged.any():
-        metrics["tracking_failures"] = int(quality[judged, 3].sum())
-        metrics["tracking_iterations_mean"] = float(quality[judged, 0].mean())
-    tested = np.isfinite(quality[:, 5])  # frames whose tracker ran the degeneracy test
+        metrics["tracking_failures"] = int(failed[judged].sum())
+        metrics["tracking_iterations_mean"] = float(quality["tracking_iterations"][judged].mean())
+    degenerate = quality["tracking_degenerate_directions"]
+    tested = np.isfinite(degenerate)  # frames whose tracker ran the degeneracy test
     if tested.any():
-        metrics["tracking_degenerate_frames"] = int((quality[tested, 5] > 0).sum())
+        metrics["tracking_degenerate_frames"] = int((degenerate[tested] > 0).sum())
     gt = state.trajectory.gt_poses()
     if gt is not None:
         poses = state.trajectory.poses.detach().cpu().double().numpy()
@@ -264,11 +270,9 @@ class RunWriter(RunObserverBase):
             "tracking_s": list(state.tracking_time),
             "mapping_s": list(state.mapping_time),
         }
-        quality = np.asarray(state.tracking_quality, dtype=np.float64).reshape(
-            -1, len(TRACKING_COLUMNS)
-        )
-        if np.isfinite(quality[:, 3]).any():  # per frame, null where not judged
-            for key, column in zip(TRACKING_COLUMNS, quality.T, strict=True):
+        quality = quality_columns(state)
+        if np.isfinite(quality["tracking_failed"]).any():  # per frame, null where not judged
+            for key, column in quality.items():
                 timings[key] = [None if np.isnan(v) else float(v) for v in column]
         if self.stream is not None:  # no resume: the run's frames are this process's
             timings["source_index"] = self.stream.source_indices[: state.next_frame]
