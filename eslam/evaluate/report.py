@@ -30,6 +30,8 @@ METRICS: tuple[tuple[str, str, str], ...] = (
     ("first_frame_s", "First frame", "s"),
     ("frames_received", "Frames received (real time)", ""),
     ("frames_dropped", "Frames dropped (real time)", ""),
+    ("tracking_failures", "Frames whose tracking failed", ""),
+    ("tracking_degenerate_frames", "Frames with a degenerate view", ""),
     ("peak_memory_mb", "Peak memory", "MB"),
     ("frames", "Frames", ""),
     ("device", "Device", ""),

@@ -17,6 +17,12 @@ def test_table_orders_and_labels_known_metrics() -> None:
     assert "ATE RMSE" in metrics_text({"ate_rmse_cm": 0.63})
 
 
+def test_table_shows_the_tracker_s_own_judgement() -> None:
+    judged = metrics_table({"tracking_failures": 0, "tracking_degenerate_frames": 157})
+    assert "| Frames whose tracking failed | 0 |" in judged
+    assert "| Frames with a degenerate view | 157 |" in judged
+
+
 def test_report_holds_table_settings_and_images(tmp_path: Path) -> None:
     path = tmp_path / "report.md"
     write_report(
