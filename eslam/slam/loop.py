@@ -76,6 +76,8 @@ from eslam.slam.run_writer import RunWriter
 from eslam.slam.state import (
     FrameMark,
     SLAMState,
+    degenerate_row,
+    degenerate_stretch,
     initial_state,
     load_state,
     new_field,
@@ -152,7 +154,6 @@ class RunLoop:
         self._frames_without_depth = 0
         self._total: int | None = None
         self._last_failed = False
-        self._degenerate_since: int | None = None
         self._before_mapping: tuple[dict[str, torch.Tensor], torch.Tensor] | None = None
         # no scene bound: one set too small is grown (or, growth off, warned about), a
         # matter of the bound and not of depth units
@@ -293,13 +294,13 @@ class RunLoop:
         )
 
     def _report_degeneracy(self, index: int, quality: TrackingQuality | None) -> None:
-        """Log where a stretch of degenerate views begins and ends (not every frame)."""
-        degenerate = (
-            quality is not None and not quality.failed and bool(quality.degenerate_directions)
-        )
-        if degenerate and self._degenerate_since is None:
+        """Log where a stretch of degenerate views begins and ends (not every frame),
+        read from the quality rows so far (so a resumed run continues its stretch)."""
+        rows = self.state.tracking_quality
+        degenerate = degenerate_row(quality_row(quality))
+        after_degenerate = bool(rows) and degenerate_row(rows[-1])
+        if degenerate and not after_degenerate:
             assert quality is not None
-            self._degenerate_since = index
             self.log.warning(
                 "frame %d: the view pins the pose down in only %d of 6 directions (smallest"
                 " normalised information %.4f): along the rest the pose follows the motion"
@@ -308,14 +309,13 @@ class RunLoop:
                 6 - int(quality.degenerate_directions or 0),
                 quality.information,
             )
-        elif not degenerate and self._degenerate_since is not None:
+        elif not degenerate and after_degenerate:
             self.log.info(
                 "frame %d: the view constrains the whole pose again (frames %d-%d were degenerate)",
                 index,
-                self._degenerate_since,
+                index - degenerate_stretch(rows),
                 index - 1,
             )
-            self._degenerate_since = None
 
     def _create_field(self, frame: Frame, has_depth: bool, pose: torch.Tensor) -> None:
         """Build the field from the first frame with depth, seen from frame 0's pose."""

@@ -36,7 +36,7 @@ from eslam.io.trajectory import write_tum_trajectory
 from eslam.slam.observers import FrameDone, RunEnd, RunObserverBase, RunStart
 from eslam.slam.progress import finite_ate_pairs
 from eslam.slam.resources import PeakMemory
-from eslam.slam.state import TRACKING_COLUMNS, SLAMState, save_state
+from eslam.slam.state import TRACKING_COLUMNS, SLAMState, degenerate_row, save_state
 from eslam.slam.stream_report import stream_metrics
 
 
@@ -88,8 +88,8 @@ def quality_columns(state: SLAMState) -> dict[str, np.ndarray]:
 
 def run_metrics(state: SLAMState, device: str, peak_memory_mb: float) -> dict:
     """metrics.json of a run: frames, device, FPT, peak memory, with a self-judging tracker
-    the failed frames and mean iterations (and with its degeneracy test on, the frames
-    with a degenerate direction), and with ground truth the ATE.
+    the failed frames and mean iterations (and with its degeneracy test on, the frames,
+    not failed, with a degenerate direction), and with ground truth the ATE.
 
     FPT (seconds per frame) = (sum of tracking and mapping times) / frames. The ATE
     (rigid alignment, cm) uses the frames whose estimate and ground truth are both finite;
@@ -108,10 +108,8 @@ def run_metrics(state: SLAMState, device: str, peak_memory_mb: float) -> dict:
     if judged.any():
         metrics["tracking_failures"] = int(failed[judged].sum())
         metrics["tracking_iterations_mean"] = float(quality["tracking_iterations"][judged].mean())
-    degenerate = quality["tracking_degenerate_directions"]
-    tested = np.isfinite(degenerate)  # frames whose tracker ran the degeneracy test
-    if tested.any():
-        metrics["tracking_degenerate_frames"] = int((degenerate[tested] > 0).sum())
+    if np.isfinite(quality["tracking_degenerate_directions"]).any():  # the test ran
+        metrics["tracking_degenerate_frames"] = sum(map(degenerate_row, state.tracking_quality))
     gt = state.trajectory.gt_poses()
     if gt is not None:
         poses = state.trajectory.poses.detach().cpu().double().numpy()

@@ -144,6 +144,26 @@ def quality_row(quality: TrackingQuality | None) -> list[float]:
     ]
 
 
+_FAILED = TRACKING_COLUMNS.index("tracking_failed")
+_DEGENERATE = TRACKING_COLUMNS.index("tracking_degenerate_directions")
+
+
+def degenerate_row(row: list[float]) -> bool:
+    """Whether a quality row is a tracked, not failed frame with a degenerate direction
+    (NaN compares false: frames not judged or not tested are not degenerate)."""
+    return row[_DEGENERATE] > 0 and row[_FAILED] == 0
+
+
+def degenerate_stretch(rows: list[list[float]]) -> int:
+    """How many of the last ``rows`` are degenerate frames (:func:`degenerate_row`)."""
+    count = 0
+    for row in reversed(rows):
+        if not degenerate_row(row):
+            break
+        count += 1
+    return count
+
+
 def quality_rows(saved: list[list[float]]) -> list[list[float]]:
     """Checkpointed quality rows at today's width: a map saved before the information
     columns existed has 4 per row; the missing ones read NaN (not computed)."""

@@ -249,30 +249,36 @@ def test_a_failed_frame_keeps_the_prediction_and_is_no_keyframe(
 
 class DegenerateStretch:
     """Tracks by the rendering tracker and reports frames 2-4 as seeing only 4 of the 6
-    pose directions (the others: all 6)."""
+    pose directions (the others: all 6). ``tracked`` counts calls across instances (a
+    resumed run builds a new tracker): reset it before a run."""
+
+    tracked = 0
 
     def __init__(self, config) -> None:
         self.real = TRACKERS["render"](config)
-        self.calls = 0
 
     def track(self, field, view, initial_pose, generator):
-        self.calls += 1  # call k tracks frame k
+        DegenerateStretch.tracked += 1  # call k tracks frame k
         result = self.real.track(field, view, initial_pose, generator)
-        degenerate = 2 if 2 <= self.calls <= 4 else 0
+        degenerate = 2 if 2 <= DegenerateStretch.tracked <= 4 else 0
         information = 0.001 if degenerate else 0.1
         quality = TrackingQuality(3, 0.95, 0.002, False, information, degenerate)
         return TrackingResult(result.pose, result.loss, quality)
 
 
+@pytest.mark.parametrize("stop_after", [None, 4])
 def test_degenerate_views_are_counted_and_logged_once_per_stretch(
-    tiny_sequence: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+    tiny_sequence: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, stop_after
 ) -> None:
     monkeypatch.setitem(TRACKERS, "degenerate", DegenerateStretch)
+    monkeypatch.setattr(DegenerateStretch, "tracked", 0)
     config = tiny_config(tiny_sequence, "output.mesh=false")
     config = dataclasses.replace(
         config, tracking=dataclasses.replace(config.tracking, method="degenerate")
     )
-    result = run_slam(config, tmp_path / "run")
+    if stop_after is not None:  # stopped inside the stretch (frames 0-3 done), resumed
+        run_slam(config, tmp_path / "run", stop_after=stop_after)
+    result = run_slam(config, tmp_path / "run", resume=stop_after is not None)
     assert result.metrics["tracking_degenerate_frames"] == 3
     assert result.metrics["tracking_failures"] == 0
     timings = json.loads((tmp_path / "run" / "timings.json").read_text())
