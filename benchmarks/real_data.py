@@ -129,9 +129,17 @@ class Row:
     wall_s: float
 
 
-def run_case(case: Case, method: str, args: argparse.Namespace) -> Row:
-    """Run ``case`` with ``method`` into ``args.out/case.name[-method]``; return its metrics."""
-    out = args.out / (case.name if args.methods is None else f"{case.name}-{method}")
+def repeats(methods: list[str]) -> list[int]:
+    """For each entry of ``methods``, how often the same tracker came before it."""
+    return [methods[:index].count(method) for index, method in enumerate(methods)]
+
+
+def run_case(case: Case, method: str, args: argparse.Namespace, repeat: int = 0) -> Row:
+    """Run ``case`` with ``method`` into ``args.out/case.name[-method][-repeat]`` (a
+    method named twice in ``--methods`` runs twice, into two folders); return its
+    metrics."""
+    name = case.name if args.methods is None else f"{case.name}-{method}"
+    out = args.out / (f"{name}-{repeat + 1}" if repeat else name)
     data = (
         synthetic_overrides(args.out, case)
         if case.synthetic is not None
@@ -180,7 +188,7 @@ def tracker_figures(row: Row) -> tuple[float, float, float, float]:
     )
     scale = float("nan")
     saved = load_checkpoint(run_dir / "map.pt")["trajectory"]
-    if saved["gt"] is not None:
+    if saved["gt"] is not None and len(saved["poses"]) >= 3:  # Sim(3) needs 3 positions
         poses, gt = saved["poses"].double().numpy(), saved["gt"].double().numpy()
         scale = absolute_trajectory_error(poses, gt, with_scale=True).alignment.scale
     fps = row.result.metrics["frames"] / max(row.wall_s, 1e-9)
@@ -265,8 +273,9 @@ def main(argv: list[str] | None = None) -> None:
         if case.name not in args.cases:
             continue
         configured = load_config(CONFIGS / case.config).tracking.method
-        for method in args.methods or [configured]:
-            row = run_case(case, method, args)
+        methods = args.methods or [configured]
+        for method, repeat in zip(methods, repeats(methods), strict=True):
+            row = run_case(case, method, args, repeat)
             print(f"{case.name} {method}: {row.result.metrics}", flush=True)
             rows.append(row)
     lines = section_head(
