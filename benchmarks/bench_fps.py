@@ -151,7 +151,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--docs-file", type=Path, default=DEFAULT_DOCS)
     parser.add_argument("--note", default="")
     parser.add_argument("overrides", nargs="*", metavar="key=value", help="config overrides")
-    args = parser.parse_args(argv)
+    args = parser.parse_intermixed_args(argv)  # overrides may come before options
     if args.frames < 2:
         parser.error("--frames must be >= 2 (the first tracked pose is frame 1's)")
     check_device(parser, args)

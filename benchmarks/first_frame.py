@@ -184,7 +184,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--no-append", action="store_true")
     parser.add_argument("--note", default="")
     parser.add_argument("overrides", nargs="*", help="config overrides key=value")
-    args = parser.parse_args(argv)
+    args = parser.parse_intermixed_args(argv)  # overrides may come before options
     args.schedules = [Schedule.parse(s) for s in (args.schedule or DEFAULT_SCHEDULES)]
     return args
 

@@ -249,7 +249,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--no-append", action="store_true")
     parser.add_argument("--note", default="")
     parser.add_argument("overrides", nargs="*", metavar="key=value", help="config overrides")
-    args = parser.parse_args(argv)
+    args = parser.parse_intermixed_args(argv)  # overrides may come before options
     if args.voxel <= 0 or args.extent <= 2 * args.voxel or args.threads < 0:
         parser.error("--voxel must be > 0, --extent > 2 voxels, --threads >= 0")
     check_device(parser, args)

@@ -245,7 +245,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--no-append", action="store_true")
     parser.add_argument("--note", default="")
     parser.add_argument("overrides", nargs="*", metavar="key=value", help="config overrides")
-    args = parser.parse_args(argv)
+    args = parser.parse_intermixed_args(argv)  # overrides may come before options
     check_device(parser, args)
     if args.segment < 1:
         parser.error("--segment must be >= 1")

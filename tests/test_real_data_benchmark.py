@@ -33,3 +33,10 @@ def test_a_tracker_named_twice_runs_into_two_folders(tmp_path: Path, monkeypatch
         "room0-paper-hybrid-2",
         "room0-paper-hybrid-3",
     ]
+
+
+def test_overrides_may_come_before_options() -> None:
+    real_data = load_script(SCRIPT)
+    args = real_data.parse_args(["--device", "cpu", "a.b=1", "--cases", "demo", "--methods", "sdf"])
+    assert args.overrides == ["a.b=1"]
+    assert args.cases == ["demo"] and args.methods == ["sdf"]

@@ -154,3 +154,11 @@ def test_a_probe_run_keeps_the_reference_and_records_the_tracker(
     pulls = np.linalg.norm(probed[:, :3, 3] - truth[3:, :3, 3], axis=1)
     assert pulls.max() < 0.01
     assert pulls.min() > 1e-6  # the tracker ran: its answers are its own
+
+
+def test_overrides_may_come_before_options(script) -> None:
+    """`... key=value --out DIR other=value` is read as the user meant, not refused."""
+    required = ["--config", "c.yaml", "--data", "d", "--switch", "5", "--frames", "9"]
+    args = script.parse_args([*required, "a.b=1", "--out", "o", "c.d=2", "--probe"])
+    assert args.overrides == ["a.b=1", "c.d=2"]
+    assert str(args.out) == "o" and args.probe
