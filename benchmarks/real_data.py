@@ -129,11 +129,6 @@ class Row:
     wall_s: float
 
 
-def repeats(methods: list[str]) -> list[int]:
-    """For each entry of ``methods``, how often the same tracker came before it."""
-    return [methods[:index].count(method) for index, method in enumerate(methods)]
-
-
 def run_case(case: Case, method: str, args: argparse.Namespace, repeat: int = 0) -> Row:
     """Run ``case`` with ``method`` into ``args.out/case.name[-method][-repeat]`` (a
     method named twice in ``--methods`` runs twice, into two folders); return its
@@ -172,6 +167,17 @@ def run_case(case: Case, method: str, args: argparse.Namespace, repeat: int = 0)
     total = frames or target
     result = run_slam(config, out, resume=True, stop_after=min(total, target))
     return Row(case, method, result, time.perf_counter() - start)
+
+
+def run_methods(case: Case, methods: list[str], args: argparse.Namespace) -> list[Row]:
+    """Run ``case`` once per entry of ``methods``, in order; a tracker named again runs
+    into a folder of its own (``-2``, ``-3``...)."""
+    rows = []
+    for index, method in enumerate(methods):
+        row = run_case(case, method, args, repeat=methods[:index].count(method))
+        print(f"{case.name} {method}: {row.result.metrics}", flush=True)
+        rows.append(row)
+    return rows
 
 
 def tracker_figures(row: Row) -> tuple[float, float, float, float]:
@@ -273,11 +279,7 @@ def main(argv: list[str] | None = None) -> None:
         if case.name not in args.cases:
             continue
         configured = load_config(CONFIGS / case.config).tracking.method
-        methods = args.methods or [configured]
-        for method, repeat in zip(methods, repeats(methods), strict=True):
-            row = run_case(case, method, args, repeat)
-            print(f"{case.name} {method}: {row.result.metrics}", flush=True)
-            rows.append(row)
+        rows.extend(run_methods(case, args.methods or [configured], args))
     lines = section_head(
         "real_data",
         device,

@@ -25,8 +25,7 @@ def test_a_tracker_named_twice_runs_into_two_folders(tmp_path: Path, monkeypatch
         ["--device", "cpu", "--out", str(tmp_path), "--cases", "room0-paper", "--methods", *methods]
     )
     case = next(c for c in real_data.CASES if c.name == "room0-paper")
-    for method, repeat in zip(args.methods, real_data.repeats(args.methods), strict=True):
-        real_data.run_case(case, method, args, repeat)
+    real_data.run_methods(case, args.methods, args)
     assert [f.name for f in folders] == [
         "room0-paper-hybrid",
         "room0-paper-render",
