@@ -19,6 +19,21 @@ the failed frames and the time per frame to docs/benchmarks.md.
 
     python benchmarks/fused_tsdf_odometry.py --config configs/sevenscenes/redkitchen.yaml \\
         --data ../shared/data/7scenes-redkitchen --frames 400 --out RUN_FOLDER
+
+With ``--probe SWITCH`` nothing is tracked into the volume: every frame is fused at its
+reference pose, and from frame SWITCH on, before the frame is fused, the SDF tracker runs
+once from the reference pose (its answer recorded as ``probed.txt``, not used) and the
+frame's depth is read against the volume at that pose. This is
+``tracking_from_reference.py --probe`` with no ESLAM map: how far the SDF objective
+pulls away from the reference on a volume made at the reference's own poses, and the
+signed residual r = T s(T q) of the frame's points there (positive: the frame measures
+the surface nearer than the frames before it, fused at their reference poses, put it),
+per depth half and per ninth of the image. On exact data both are zero to within the
+voxels' interpolation; where they are not, the depth and the reference poses disagree,
+whatever map a tracker builds.
+
+    python benchmarks/fused_tsdf_odometry.py --config configs/sevenscenes/redkitchen.yaml \\
+        --data ../shared/data/7scenes-redkitchen --frames 400 --probe 20 --out RUN_FOLDER
 """
 
 from __future__ import annotations
@@ -26,6 +41,7 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -42,16 +58,18 @@ from _machine import (
     publish,
     section_head,
 )
+from tracking_from_reference import pull_rows
 
-from eslam.config import load_config
+from eslam.config import ESLAMConfig, SdfTrackerConfig, load_config
 from eslam.data import open_sequence
+from eslam.data.base import RGBDSequence
 from eslam.evaluate.trajectory import absolute_trajectory_error
 from eslam.geometry.camera import pixels_to_camera_directions, project_points
 from eslam.geometry.pose import extrapolate_constant_velocity
 from eslam.io.trajectory import write_tum_trajectory
 from eslam.render.rays import camera_directions
 from eslam.slam.sdf_tracking import track_sdf
-from eslam.slam.views import make_view
+from eslam.slam.views import View, make_view
 from eslam.slam.warm_start import projective_tsdf
 from eslam.types import FieldOutput, Intrinsics
 
@@ -178,6 +196,58 @@ class Odometry:
     seconds_per_frame: float
 
 
+@dataclass(frozen=True)
+class Setting:
+    """What an odometry run and a probe share: the config, the sequence, its camera's
+    ray directions, and the volume with the first frame fused at ``start``."""
+
+    config: ESLAMConfig
+    sequence: RGBDSequence
+    directions: torch.Tensor
+    volume: VoxelTsdf
+    start: torch.Tensor
+
+
+def setting(
+    config_path: Path,
+    data: Path,
+    frames: int,
+    voxel: float,
+    extent: float,
+    device: torch.device,
+    overrides: tuple[str, ...],
+) -> Setting:
+    """Open ``data`` with the config (``overrides`` applied) and fuse its first frame at
+    its reference pose (the identity without one) into a cube of side ``extent``
+    centred ``extent / 2 - 1`` m in front of that camera."""
+    given = [f"data.path={data}", "data.register_colour=false", *overrides]
+    config = load_config(config_path, given)
+    sequence = open_sequence(config.data)
+    if frames < 2 or frames > len(sequence):
+        raise SystemExit(f"{data}: --frames must be in 2..{len(sequence)}, got {frames}")
+    first = sequence[0]
+    start = torch.as_tensor(
+        first.pose_gt if first.pose_gt is not None else np.eye(4),
+        dtype=torch.float32,
+        device=device,
+    )
+    forward = start[:3, 2] * (0.5 * extent - 1.0)
+    volume = empty_volume(start[:3, 3] + forward, extent, voxel, config.field.truncation)
+    fuse(volume, torch.as_tensor(first.depth, device=device), sequence.intrinsics, start)
+    directions = camera_directions(sequence.intrinsics, device)
+    return Setting(config, sequence, directions, volume, start)
+
+
+def frame_view(setting: Setting, index: int) -> tuple[View, torch.Tensor]:
+    """Frame ``index`` as the tracker sees it (the config's border) and its depth (H, W)."""
+    frame = setting.sequence[index]
+    device = setting.directions.device
+    depth = torch.as_tensor(frame.depth, device=device)
+    rgb = torch.as_tensor(frame.rgb, device=device).float() / 255.0
+    view = make_view(rgb, depth, setting.directions, border=setting.config.tracking.border)
+    return view, depth
+
+
 def fused_tsdf_odometry(
     config_path: Path,
     data: Path,
@@ -189,49 +259,182 @@ def fused_tsdf_odometry(
     overrides: tuple[str, ...] = (),
 ) -> tuple[Odometry, np.ndarray | None, np.ndarray]:
     """Track the first ``frames`` frames of ``data`` against a TSDF fused from them
-    (module doc); the volume is a cube of side ``extent`` centred ``extent / 2 - 1`` m
-    in front of the first camera; ``overrides`` (``key=value``) apply to the config.
-    Returns the odometry, the ground truth poses (or None) and the timestamps."""
-    given = [f"data.path={data}", "data.register_colour=false", *overrides]
-    config = load_config(config_path, given)
-    sequence = open_sequence(config.data)
-    if frames < 2 or frames > len(sequence):
-        raise SystemExit(f"{data}: --frames must be in 2..{len(sequence)}, got {frames}")
-    intrinsics = sequence.intrinsics
-    directions = camera_directions(intrinsics, device)
-    settings = config.tracking.sdf
+    (module doc); the volume as :func:`setting` makes it; ``overrides`` (``key=value``)
+    apply to the config. Returns the odometry, the ground truth poses (or None) and the
+    timestamps."""
+    run = setting(config_path, data, frames, voxel, extent, device, overrides)
     generator = torch.Generator(device=device).manual_seed(seed)
-    first = sequence[0]
-    start = first.pose_gt if first.pose_gt is not None else np.eye(4)
-    poses = [torch.as_tensor(start, dtype=torch.float32, device=device)]
-    forward = poses[0][:3, 2] * (0.5 * extent - 1.0)
-    truncation = config.field.truncation
-    volume = empty_volume(poses[0][:3, 3] + forward, extent, voxel, truncation)
-    depth = torch.as_tensor(first.depth, device=device)
-    fuse(volume, depth, intrinsics, poses[0])
+    poses = [run.start]
     failed = []
     begin = time.perf_counter()
     for index in range(1, frames):
-        frame = sequence[index]
-        depth = torch.as_tensor(frame.depth, device=device)
-        rgb = torch.as_tensor(frame.rgb, device=device).float() / 255.0
-        view = make_view(rgb, depth, directions, border=config.tracking.border)
+        view, depth = frame_view(run, index)
         guess = poses[-1]
-        if config.tracking.constant_velocity and len(poses) > 1:
+        if run.config.tracking.constant_velocity and len(poses) > 1:
             guess = extrapolate_constant_velocity(poses[-2], poses[-1])
-        result = track_sdf(volume, view, guess, settings, generator)
+        result = track_sdf(run.volume, view, guess, run.config.tracking.sdf, generator)
         if result.quality is not None and result.quality.failed:
             failed.append(index)
             poses.append(guess)
             continue
         poses.append(result.pose)
-        fuse(volume, depth, intrinsics, result.pose)
+        fuse(run.volume, depth, run.sequence.intrinsics, result.pose)
     seconds = (time.perf_counter() - begin) / (frames - 1)
     estimate = torch.stack(poses).double().cpu().numpy()
-    truth = sequence.gt_poses()
-    timestamps = sequence.timestamps()[:frames]
+    truth = run.sequence.gt_poses()
+    timestamps = run.sequence.timestamps()[:frames]
     odometry = Odometry(estimate, failed, seconds)
     return odometry, (truth[:frames] if truth is not None else None), timestamps
+
+
+MIN_REGION_POINTS = 50
+"""Points in the band an image ninth needs for its median residual (else NaN)."""
+
+
+@dataclass(frozen=True)
+class FrameResidual:
+    """A frame's signed residuals r = T s(T q) at a pose (metres; positive: the point
+    lies in front of the volume's surface), medians over its sampleable pixels whose
+    |s| is below the tracker's ``max_sdf``.
+
+    Attributes:
+        median: over all of them.
+        near: over those nearer than their median depth.
+        far: over the others.
+        ninths: (3, 3) per ninth of the image, rows top to bottom (NaN with fewer than
+            :data:`MIN_REGION_POINTS`).
+    """
+
+    median: float
+    near: float
+    far: float
+    ninths: np.ndarray
+
+
+def frame_residual(
+    volume: VoxelTsdf, view: View, pose: torch.Tensor, width: int, height: int, max_sdf: float
+) -> FrameResidual:
+    """The signed residuals of every sampleable pixel of ``view`` (``width`` x ``height``)
+    at ``pose`` against ``volume`` (:class:`FrameResidual`)."""
+    pixels = torch.nonzero(torch.diff(view.cumulative, prepend=view.cumulative[:1] * 0))[:, 0]
+    camera = view.directions[pixels] * view.depth[pixels, None]
+    world = camera @ pose[:3, :3].T + pose[:3, 3]
+    with torch.no_grad():
+        sdf = volume.query(world).sdf
+    band = sdf.abs() < max_sdf
+    residual = (volume.truncation * sdf)[band]
+    depth, pixels = camera[band, 2], pixels[band]
+    if len(residual) == 0:
+        nan = float("nan")
+        return FrameResidual(nan, nan, nan, np.full((3, 3), np.nan))
+    near = depth < depth.median()
+    column, row = pixels % width, pixels // width
+    ninth = (3 * row // height) * 3 + 3 * column // width
+    ninths = [
+        float(residual[ninth == k].median())
+        if int((ninth == k).sum()) >= MIN_REGION_POINTS
+        else float("nan")
+        for k in range(9)
+    ]
+    far = residual[~near]
+    return FrameResidual(
+        median=float(residual.median()),
+        near=float(residual[near].median()) if bool(near.any()) else float("nan"),
+        far=float(far.median()) if len(far) else float("nan"),
+        ninths=np.array(ninths).reshape(3, 3),
+    )
+
+
+@dataclass(frozen=True)
+class ReferenceProbe:
+    """What :func:`probe_reference` measured from frame ``switch`` on.
+
+    Attributes:
+        probed: (N - switch, 4, 4) float64: the SDF tracker's answer from each
+            frame's reference pose.
+        residuals: the frames' :class:`FrameResidual` at their reference poses.
+        reference: (N, 4, 4) float64 reference poses of frames 0..N-1.
+        timestamps: (N,) their timestamps.
+    """
+
+    probed: np.ndarray
+    residuals: list[FrameResidual]
+    reference: np.ndarray
+    timestamps: np.ndarray
+
+
+def probe_reference(
+    config_path: Path,
+    data: Path,
+    switch: int,
+    frames: int,
+    voxel: float,
+    extent: float,
+    device: torch.device,
+    seed: int = 0,
+    overrides: tuple[str, ...] = (),
+) -> ReferenceProbe:
+    """Fuse frames 0..``frames``-1 at their reference poses; from ``switch`` on, before
+    each is fused, track it from its reference pose and read its residuals there
+    (module doc, ``--probe``)."""
+    run = setting(config_path, data, frames, voxel, extent, device, overrides)
+    if not 1 <= switch < frames:
+        raise SystemExit(f"{data}: need 1 <= --probe < --frames, got {switch} and {frames}")
+    truth = run.sequence.gt_poses()
+    if truth is None or not np.isfinite(truth[:frames]).all():
+        raise SystemExit(f"{data}: --probe needs a ground-truth pose for each of {frames} frames")
+    reference = torch.as_tensor(truth[:frames], dtype=torch.float32, device=device)
+    settings: SdfTrackerConfig = run.config.tracking.sdf
+    intrinsics = run.sequence.intrinsics
+    generator = torch.Generator(device=device).manual_seed(seed)
+    answers, residuals = [], []
+    for index in range(1, frames):
+        view, depth = frame_view(run, index)
+        pose = reference[index]
+        if index >= switch:
+            answers.append(track_sdf(run.volume, view, pose, settings, generator).pose)
+            residuals.append(
+                frame_residual(
+                    run.volume, view, pose, intrinsics.width, intrinsics.height, settings.max_sdf
+                )
+            )
+        fuse(run.volume, depth, intrinsics, pose)
+    return ReferenceProbe(
+        probed=torch.stack(answers).double().cpu().numpy(),
+        residuals=residuals,
+        reference=truth[:frames],
+        timestamps=run.sequence.timestamps()[:frames],
+    )
+
+
+def nan_median(values: np.ndarray, axis: int | None = None) -> np.ndarray:
+    """np.nanmedian, NaN (without a warning) where every value is NaN."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # "All-NaN slice encountered"
+        return np.nanmedian(values, axis=axis)
+
+
+def residual_rows(residuals: list[FrameResidual], switch: int, segment: int) -> list[str]:
+    """One markdown row per ``segment`` frames from ``switch`` (``residuals[k]`` is frame
+    ``switch + k``'s): the medians over the segment's frames of each frame's median
+    residual, near half and far half (mm), and of each ninth (mm; rows top to bottom,
+    ``/`` between rows)."""
+    rows = []
+    for start in range(0, len(residuals), segment):
+        chunk = residuals[start : start + segment]
+        first, last = switch + start, switch + start + len(chunk) - 1
+
+        def median_mm(values: list[float]) -> str:
+            return f"{1000 * nan_median(np.array(values)):+.1f}"
+
+        ninths = 1000 * nan_median(np.stack([r.ninths for r in chunk]), axis=0)
+        image = " / ".join(" ".join(f"{value:+.1f}" for value in row) for row in ninths)
+        rows.append(
+            f"| {first}-{last} | {median_mm([r.median for r in chunk])} "
+            f"| {median_mm([r.near for r in chunk])} | {median_mm([r.far for r in chunk])} "
+            f"| {image} |"
+        )
+    return rows
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
@@ -243,6 +446,13 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--voxel", type=float, default=0.02, help="metres (0.02)")
     parser.add_argument("--extent", type=float, default=6.0, help="cube side, metres (6)")
     parser.add_argument("--seed", type=int, default=0, help="of the SDF tracker's points")
+    parser.add_argument(
+        "--probe",
+        type=int,
+        metavar="SWITCH",
+        help="fuse at the reference poses; probe the tracker from them from frame SWITCH on",
+    )
+    parser.add_argument("--segment", type=int, default=50, help="frames per probe row (50)")
     parser.add_argument("--threads", type=int, default=0, help="0 = torch's default")
     add_device_argument(parser)
     parser.add_argument("--docs", type=Path, default=DEFAULT_DOCS)
@@ -252,16 +462,14 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     args = parser.parse_intermixed_args(argv)  # overrides may come before options
     if args.voxel <= 0 or args.extent <= 2 * args.voxel or args.threads < 0:
         parser.error("--voxel must be > 0, --extent > 2 voxels, --threads >= 0")
+    if args.segment < 1:
+        parser.error("--segment must be >= 1")
     check_device(parser, args)
     return args
 
 
-def main(argv: list[str] | None = None) -> None:
-    args = parse_args(argv)
-    if args.threads > 0:
-        torch.set_num_threads(args.threads)
-    device = torch.device(args.device)
-    load_start = load_average()
+def odometry_table(args: argparse.Namespace, device: torch.device) -> list[str]:
+    """Run the odometry, write its trajectory and return its section's table."""
     odometry, truth, timestamps = fused_tsdf_odometry(
         args.config,
         args.data,
@@ -274,6 +482,68 @@ def main(argv: list[str] | None = None) -> None:
     )
     args.out.mkdir(parents=True, exist_ok=True)
     write_tum_trajectory(args.out / "trajectory.txt", timestamps, odometry.poses)
+    lines = [
+        "| frames | ATE RMSE | Sim(3) ATE | Sim(3) scale | failed frames | s/frame |",
+        "|---:|---:|---:|---:|---:|---:|",
+    ]
+    if truth is None:
+        ate = sim3 = scale = "n/a (no ground truth)"
+    else:
+        rigid = absolute_trajectory_error(odometry.poses, truth)
+        similar = absolute_trajectory_error(odometry.poses, truth, with_scale=True)
+        ate, sim3 = f"{100 * rigid.rmse:.2f} cm", f"{100 * similar.rmse:.2f} cm"
+        scale = f"{similar.alignment.scale:.4f}"
+    lines.append(
+        f"| {args.frames} | {ate} | {sim3} | {scale} | {len(odometry.failed)} "
+        f"| {odometry.seconds_per_frame:.2f} |"
+    )
+    return lines
+
+
+def probe_tables(args: argparse.Namespace, device: torch.device) -> list[str]:
+    """Run the probe, write the tracker's answers and return its section's tables."""
+    switch = args.probe
+    probe = probe_reference(
+        args.config,
+        args.data,
+        switch,
+        args.frames,
+        args.voxel,
+        args.extent,
+        device,
+        args.seed,
+        tuple(args.overrides),
+    )
+    args.out.mkdir(parents=True, exist_ok=True)
+    write_tum_trajectory(args.out / "probed.txt", probe.timestamps[switch:], probe.probed)
+    return [
+        f"- every frame fused at its reference pose; from frame {switch} the SDF tracker "
+        "runs once per frame from the reference pose before the frame is fused, its "
+        "answer recorded, not used",
+        "",
+        "| frames | reference step, median (mm) | pull, median (mm) | pull, largest (mm) "
+        "| pull along the motion / step | rotation pull, median (deg) |",
+        "|---|---:|---:|---:|---:|---:|",
+        *pull_rows(probe.probed, probe.reference, switch, args.segment),
+        "",
+        "Signed residual T s(T q) of each frame's points at its reference pose against the "
+        "frames fused before it (positive: nearer than the volume's surface), medians of "
+        "the per-frame medians (mm):",
+        "",
+        "| frames | all points | nearer half | farther half | by ninth of the image, "
+        "rows top to bottom |",
+        "|---|---:|---:|---:|---|",
+        *residual_rows(probe.residuals, switch, args.segment),
+    ]
+
+
+def main(argv: list[str] | None = None) -> None:
+    args = parse_args(argv)
+    if args.threads > 0:
+        torch.set_num_threads(args.threads)
+    device = torch.device(args.device)
+    load_start = load_average()
+    tables = probe_tables(args, device) if args.probe is not None else odometry_table(args, device)
     lines = section_head(
         "fused_tsdf_odometry",
         device,
@@ -287,19 +557,7 @@ def main(argv: list[str] | None = None) -> None:
         f"- voxel TSDF: {args.voxel:g} m voxels, a {args.extent:g} m cube, truncation "
         "from the config's field.truncation; tracker: the config's tracking.sdf and border",
         "",
-        "| frames | ATE RMSE | Sim(3) ATE | Sim(3) scale | failed frames | s/frame |",
-        "|---:|---:|---:|---:|---:|---:|",
-    ]
-    if truth is None:
-        ate = sim3 = scale = "n/a (no ground truth)"
-    else:
-        rigid = absolute_trajectory_error(odometry.poses, truth)
-        similar = absolute_trajectory_error(odometry.poses, truth, with_scale=True)
-        ate, sim3 = f"{100 * rigid.rmse:.2f} cm", f"{100 * similar.rmse:.2f} cm"
-        scale = f"{similar.alignment.scale:.4f}"
-    lines += [
-        f"| {args.frames} | {ate} | {sim3} | {scale} | {len(odometry.failed)} "
-        f"| {odometry.seconds_per_frame:.2f} |",
+        *tables,
         "",
     ]
     publish("\n".join(lines), args.docs, args.no_append)

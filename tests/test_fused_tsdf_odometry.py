@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -102,3 +103,69 @@ def test_odometry_follows_the_camera(script, tmp_path: Path, capsys) -> None:
         )  # fmt: skip
     with pytest.raises(SystemExit, match=r"--frames must be in 2\.\.10"):
         script.fused_tsdf_odometry(CONFIG, tmp_path / "seq", 11, 0.03, 6.0, torch.device("cpu"))
+
+
+def _sequence(tmp_path: Path, shorten_from: int | None = None) -> Path:
+    """The synthetic room's first 10 frames as a 7-Scenes folder; with ``shorten_from``,
+    the depth of that frame and the later ones read 1 % short (a depth the reference
+    poses disagree with)."""
+    frames = list(generate_sequence(SynthConfig(frames=10, width=160, height=120, seed=3)))
+    if shorten_from is not None:
+        frames = [
+            dataclasses.replace(frame, depth=frame.depth * 0.99) if i >= shorten_from else frame
+            for i, frame in enumerate(frames)
+        ]
+    write_sevenscenes_sequence(tmp_path / "seq", frames)
+    return tmp_path / "seq"
+
+
+def test_probe_on_exact_data_stays_at_the_reference(script, tmp_path: Path) -> None:
+    data = _sequence(tmp_path)
+    probe = script.probe_reference(CONFIG, data, 5, 10, 0.03, 6.0, torch.device("cpu"))
+    assert probe.probed.shape == (5, 4, 4) and len(probe.residuals) == 5
+    pulls = np.linalg.norm(probe.probed[:, :3, 3] - probe.reference[5:, :3, 3], axis=1)
+    assert pulls.max() < 0.003  # 3 cm voxels: their interpolation moves the surface ~2 mm
+    assert all(abs(r.median) < 0.001 and abs(r.far) < 0.001 for r in probe.residuals)
+
+
+def test_probe_measures_a_depth_the_reference_disagrees_with(script, tmp_path: Path) -> None:
+    """Frames 5-9 read 1 % short: at their reference poses their points lie in front of
+    the surface frames 0-4 fused (positive residuals, more on the far half), and the
+    tracker pulls the camera towards the surface. A probe that did not track, or read
+    the volume at the wrong pose, would report no pull or no residual."""
+    data = _sequence(tmp_path, shorten_from=5)
+    probe = script.probe_reference(CONFIG, data, 5, 10, 0.03, 6.0, torch.device("cpu"))
+    pulls = np.linalg.norm(probe.probed[:, :3, 3] - probe.reference[5:, :3, 3], axis=1)
+    assert np.median(pulls) > 0.01
+    assert all(r.median > 0.01 and r.far > r.near for r in probe.residuals)
+    with pytest.raises(SystemExit, match="--probe < --frames"):
+        script.probe_reference(CONFIG, data, 10, 10, 0.03, 6.0, torch.device("cpu"))
+
+
+def test_residual_rows_take_medians_over_the_segment(script) -> None:
+    ninths = np.arange(9, dtype=float).reshape(3, 3) / 1000
+    residuals = [
+        script.FrameResidual(0.001 * k, -0.002, 0.003 * k, ninths + 0.001 * k) for k in range(3)
+    ]
+    residuals[2] = script.FrameResidual(0.002, -0.002, float("nan"), np.full((3, 3), np.nan))
+    rows = script.residual_rows(residuals, switch=20, segment=2)
+    assert rows[0] == (
+        "| 20-21 | +0.5 | -2.0 | +1.5 | +0.5 +1.5 +2.5 / +3.5 +4.5 +5.5 / +6.5 +7.5 +8.5 |"
+    )
+    assert rows[1].startswith("| 22-22 | +2.0 | -2.0 | +nan |")
+
+
+def test_probe_command_writes_the_answers_and_tables(script, tmp_path: Path, capsys) -> None:
+    data = _sequence(tmp_path)
+    script.main(
+        ["--config", str(CONFIG), "--data", str(data), "--frames", "6", "--probe", "3",
+         "--segment", "2", "--out", str(tmp_path / "run"), "--voxel", "0.03",
+         "--device", "cpu", "--no-append", "tracking.sdf.levels=[500]"]
+    )  # fmt: skip
+    out = capsys.readouterr().out
+    assert "| 3-4 |" in out and "| 5-5 |" in out and "by ninth of the image" in out
+    _, probed = read_trajectory(tmp_path / "run" / "probed.txt")
+    assert probed.shape == (3, 4, 4)
+    with pytest.raises(SystemExit):
+        script.main(["--config", str(CONFIG), "--data", str(data), "--frames", "6",
+                     "--probe", "3", "--segment", "0", "--out", str(tmp_path / "x")])  # fmt: skip
