@@ -96,3 +96,27 @@ def tiny_static_ate_cm(tiny_sequence: Path) -> float:
     from eslam.data import open_sequence
 
     return static_ate_cm(open_sequence(DataConfig(path=str(tiny_sequence))).gt_poses())
+
+
+def close_after_adam(
+    ours: torch.Tensor,
+    reference: torch.Tensor,
+    rtol: float,
+    atol: float,
+    outliers: float = 1e-4,
+    largest: float = 1e-3,
+) -> bool:
+    """Parameters after Adam steps taken in two computation orders, equal up to rounding.
+
+    Adam divides each element's gradient by its own running RMS, so an element whose
+    gradient is rounding noise (near zero, its sign set by the order of a sum) can take
+    a step of the learning rate's size in one order and not in the other: how many such
+    elements there are depends on the CPU's vector width. All elements but a fraction
+    ``outliers`` (at least one) must be allclose with ``rtol``/``atol``, and none may
+    differ by more than ``largest`` (a learning-rate-sized step; a wrong gradient or a
+    missed step moves far more elements than that).
+    """
+    difference = (ours - reference).abs()
+    mismatched = ~torch.isclose(ours, reference, rtol=rtol, atol=atol)
+    allowed = max(1, int(outliers * reference.numel()))
+    return int(mismatched.sum()) <= allowed and float(difference.max()) <= largest

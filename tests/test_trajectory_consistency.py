@@ -67,7 +67,9 @@ def test_reports_the_injected_jump(script, tmp_path: Path, capsys) -> None:
     assert floor == estimate_ate != "0.00"
     gap_six = next(line for line in out.splitlines() if line.startswith("| 6 |"))
     better, pairs = gap_six.split("|")[5].strip().split(" of ")
-    assert better == pairs  # every pair across the jump favours the estimate
+    # Pairs (0, 6) to (4, 10) cross the jump and favour the estimate; (5, 11) lies after
+    # it, where both trajectories have the same relative pose (a tie rounding decides).
+    assert pairs == "6" and int(better) >= 5
     # The ATE errors by place in the mapping cycle (12 frames, 3 per place) make up the ATE.
     cycle = out.split("i mod every |")[1].split("\n\n")[0].splitlines()[2:]
     by_place = np.array([float(row.strip("|").split("|")[4]) for row in cycle])

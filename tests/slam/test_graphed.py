@@ -22,6 +22,7 @@ from eslam.slam.mapping import MappingSchedule, MappingSettings, map_window
 from eslam.slam.trackers import make_tracker
 from eslam.slam.tracking import RenderTracker, TrackingSettings, track_frame
 from eslam.slam.warm_start import WarmStart
+from tests.conftest import close_after_adam
 from tests.slam.test_static_steps import moved, window_views
 from tests.slam.test_steps import BOUND, _setup
 
@@ -156,7 +157,7 @@ def test_graphed_mapping_equals_map_window_and_recaptures(device: str) -> None:
         assert mapper.captures == captures
         assert _close(ours.poses, eager.poses) and _close(ours.loss, eager.loss)
         for a, b in zip(graph_field.parameters(), eager_field.parameters(), strict=True):
-            assert _close(a.detach(), b.detach())
+            assert close_after_adam(a.detach(), b.detach(), rtol=1e-4, atol=1e-5)
     assert torch.equal(graph_generator.get_state(), eager_generator.get_state())
 
 

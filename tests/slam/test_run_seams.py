@@ -169,7 +169,10 @@ def test_a_run_leaves_no_process_wide_state(tiny_sequence: Path, tmp_path: Path)
         check=True,
         cwd=Path(__file__).resolve().parents[2],
     )  # fmt: skip
-    np.testing.assert_array_equal(second.poses, np.load(alone))
+    # equal up to float32 rounding: on AVX-512 CPUs the math libraries' reductions can
+    # round differently from one process to the next (seen with OMP_NUM_THREADS=1: 6e-8);
+    # state carried over from the first run (random draws, settings) moves poses by far more
+    np.testing.assert_allclose(second.poses, np.load(alone), rtol=0, atol=1e-6)
     assert second.metrics["peak_memory_mb"] > 0
 
 
