@@ -154,14 +154,23 @@ def frustum_block(
     return z, y, x
 
 
-def fuse(volume: VoxelTsdf, depth: torch.Tensor, intrinsics: Intrinsics, c2w: torch.Tensor) -> None:
+def fuse(
+    volume: VoxelTsdf,
+    depth: torch.Tensor,
+    intrinsics: Intrinsics,
+    c2w: torch.Tensor,
+    remove: bool = False,
+) -> None:
     """Average one depth image (H, W; metres, 0 = invalid) seen from ``c2w`` into
-    ``volume`` in place (Curless and Levoy 1996; KinectFusion's eq. 11-12 with weight 1).
+    ``volume`` in place (Curless and Levoy 1996; KinectFusion's eq. 11-12 with weight 1),
+    or with ``remove`` take an image fused earlier back out.
 
     Each voxel centre p projects to its nearest pixel with depth D; with z its depth in
     the camera, the observation is s = clip((D - z) / T, -1, 1) where D > 0 and
     D - z >= -T (voxels further behind the surface are not observed), and the voxel's
-    value becomes (W s_old + s) / (W + 1), W <- W + 1."""
+    value becomes (W s_old + s) / (W + 1), W <- W + 1. Removing (BundleFusion's
+    de-integration, Dai et al. 2017) inverts it: (W s_old - s) / (W - 1), W <- W - 1,
+    and a voxel left with no observation reads :data:`UNSEEN` again."""
     block = frustum_block(volume, depth, intrinsics, c2w)
     if block is None:
         return
@@ -180,8 +189,10 @@ def fuse(volume: VoxelTsdf, depth: torch.Tensor, intrinsics: Intrinsics, c2w: to
     )
     observed = inside & (measured > 0) & (measured - z >= -volume.truncation)
     observation = projective_tsdf(z, measured, volume.truncation)
-    total = weights + observed.to(weights.dtype)
-    average = (values * weights + observation) / total.clamp_min(1.0)
+    sign = -1.0 if remove else 1.0
+    total = weights + sign * observed.to(weights.dtype)
+    average = (values * weights + sign * observation) / total.clamp_min(1.0)
+    average = torch.where(total > 0, average, torch.full_like(average, UNSEEN))
     values.copy_(torch.where(observed, average, values))
     weights.copy_(total)
 
@@ -373,13 +384,18 @@ def probe_reference(
     device: torch.device,
     seed: int = 0,
     overrides: tuple[str, ...] = (),
+    keep: int | None = None,
 ) -> ReferenceProbe:
     """Fuse frames 0..``frames``-1 at their reference poses; from ``switch`` on, before
     each is fused, track it from its reference pose and read its residuals there
-    (module doc, ``--probe``)."""
+    (module doc, ``--probe``). With ``keep`` K the volume holds the last K frames only
+    (frame i - K is taken out when frame i is fused): the tracker sees the reference's
+    poses over a span of K frames instead of since frame 0."""
     run = setting(config_path, data, frames, voxel, extent, device, overrides)
     if not 1 <= switch < frames:
         raise SystemExit(f"{data}: need 1 <= --probe < --frames, got {switch} and {frames}")
+    if keep is not None and keep < 1:
+        raise SystemExit(f"--keep must be >= 1, got {keep}")
     truth = run.sequence.gt_poses()
     if truth is None or not np.isfinite(truth[:frames]).all():
         raise SystemExit(f"{data}: --probe needs a ground-truth pose for each of {frames} frames")
@@ -399,6 +415,9 @@ def probe_reference(
                 )
             )
         fuse(run.volume, depth, intrinsics, pose)
+        if keep is not None and index >= keep:
+            gone = torch.as_tensor(run.sequence[index - keep].depth, device=device)
+            fuse(run.volume, gone, intrinsics, reference[index - keep], remove=True)
     return ReferenceProbe(
         probed=torch.stack(answers).double().cpu().numpy(),
         residuals=residuals,
@@ -453,6 +472,9 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         help="fuse at the reference poses; probe the tracker from them from frame SWITCH on",
     )
     parser.add_argument("--segment", type=int, default=50, help="frames per probe row (50)")
+    parser.add_argument(
+        "--keep", type=int, help="--probe: the volume holds the last KEEP frames only"
+    )
     parser.add_argument("--threads", type=int, default=0, help="0 = torch's default")
     add_device_argument(parser)
     parser.add_argument("--docs", type=Path, default=DEFAULT_DOCS)
@@ -464,6 +486,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         parser.error("--voxel must be > 0, --extent > 2 voxels, --threads >= 0")
     if args.segment < 1:
         parser.error("--segment must be >= 1")
+    if args.keep is not None and (args.keep < 1 or args.probe is None):
+        parser.error("--keep must be >= 1 and goes with --probe")
     check_device(parser, args)
     return args
 
@@ -513,13 +537,15 @@ def probe_tables(args: argparse.Namespace, device: torch.device) -> list[str]:
         device,
         args.seed,
         tuple(args.overrides),
+        args.keep,
     )
     args.out.mkdir(parents=True, exist_ok=True)
     write_tum_trajectory(args.out / "probed.txt", probe.timestamps[switch:], probe.probed)
+    held = "every frame so far" if args.keep is None else f"the last {args.keep} frames only"
     return [
-        f"- every frame fused at its reference pose; from frame {switch} the SDF tracker "
-        "runs once per frame from the reference pose before the frame is fused, its "
-        "answer recorded, not used",
+        f"- every frame fused at its reference pose (the volume holds {held}); from frame "
+        f"{switch} the SDF tracker runs once per frame from the reference pose before the "
+        "frame is fused, its answer recorded, not used",
         "",
         "| frames | reference step, median (mm) | pull, median (mm) | pull, largest (mm) "
         "| pull along the motion / step | rotation pull, median (deg) |",
