@@ -30,10 +30,12 @@ signed residual r = T s(T q) of the frame's points there (positive: the frame me
 the surface nearer than the frames before it, fused at their reference poses, put it),
 per depth half and per ninth of the image. On exact data both are zero to within the
 voxels' interpolation; where they are not, the depth and the reference poses disagree,
-whatever map a tracker builds.
+whatever map a tracker builds. ``--keep K`` keeps only the last K frames in the volume
+(each frame K behind is taken back out, BundleFusion's de-integration): whether the
+reference agrees with the depth over a short span but not with frames fused long before.
 
     python benchmarks/fused_tsdf_odometry.py --config configs/sevenscenes/redkitchen.yaml \\
-        --data ../shared/data/7scenes-redkitchen --frames 400 --probe 20 --out RUN_FOLDER
+        --data ../shared/data/7scenes-redkitchen --frames 400 --probe 20 [--keep K] --out RUN_FOLDER
 """
 
 from __future__ import annotations
