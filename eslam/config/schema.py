@@ -437,8 +437,9 @@ class MappingConfig:
     """Map every k-th frame (plus the last); every mapped frame becomes a keyframe."""
     window: int = 20
     """Keyframes optimised together: current, two latest, the rest drawn from the list."""
-    selection: Literal["random", "overlap"] = "random"
-    """Window policy: random over all keyframes (paper) or over overlapping ones (release)."""
+    selection: Literal["random", "overlap", "recent"] = "random"
+    """Window policy: random over all keyframes (paper), over overlapping ones (release),
+    or the latest keyframes only (a sliding window)."""
     rays: int = 4000
     """Rays per step in total over the window, split evenly (Replica 4000, TUM 5000)."""
     iterations: int = 15

@@ -395,10 +395,38 @@ class OverlapWindow:
         return sorted(required + _draw(pool, remaining, generator))
 
 
-def make_window_strategy(config: MappingConfig) -> RandomWindow | OverlapWindow:
+@dataclass(frozen=True)
+class RecentWindow:
+    """A sliding window: the current keyframe and the latest others, ``size`` in all,
+    no random draw (the local windows of keyframe odometry, e.g. DVO-SLAM's). The map is
+    then refitted to recent views only, so older ones stop pulling it towards a
+    consensus over the whole sequence (docs/results.md, 7-Scenes: "--keep").
+
+    Attributes:
+        size: keyframes in the window, >= 3.
+    """
+
+    size: int = 20
+
+    def __post_init__(self) -> None:
+        if self.size < 3:
+            raise ValueError(f"window size must be >= 3 (current and two latest), got {self.size}")
+
+    def select(
+        self, store: KeyframeStore, current: int, generator: torch.Generator | None = None
+    ) -> list[int]:
+        """Sorted keyframe ids: current and the latest others (``generator`` is unused)."""
+        required = _required(len(store), current)
+        pool = [k for k in range(len(store) - 1, -1, -1) if k not in required]
+        return sorted(required + pool[: max(self.size - len(required), 0)])
+
+
+def make_window_strategy(config: MappingConfig) -> WindowStrategy:
     """The window policy ``config.selection`` names, of ``config.window`` keyframes."""
     if config.selection == "random":
         return RandomWindow(config.window)
     if config.selection == "overlap":
         return OverlapWindow(config.window)
-    raise ValueError(f"selection must be 'random' or 'overlap', got '{config.selection}'")
+    if config.selection == "recent":
+        return RecentWindow(config.window)
+    raise ValueError(f"selection must be 'random', 'overlap' or 'recent', got '{config.selection}'")

@@ -15,6 +15,7 @@ from eslam.slam.keyframes import (
     KeyframeStore,
     OverlapWindow,
     RandomWindow,
+    RecentWindow,
     make_window_strategy,
 )
 from eslam.slam.trajectory import Trajectory
@@ -270,3 +271,14 @@ def test_make_window_strategy() -> None:
     assert make_window_strategy(MappingConfig()) == RandomWindow(20)
     made = make_window_strategy(MappingConfig(window=7, selection="overlap"))
     assert isinstance(made, OverlapWindow) and made.size == 7
+
+
+def test_recent_window_takes_the_latest_keyframes() -> None:
+    window = RecentWindow(size=4)
+    store = _store_of(10)
+    assert window.select(store, 9) == [6, 7, 8, 9]
+    assert window.select(store, 3) == [3, 7, 8, 9]  # current and the latest others
+    assert window.select(_store_of(2), 1) == [0, 1]
+    assert make_window_strategy(MappingConfig(window=4, selection="recent")) == window
+    with pytest.raises(ValueError, match=">= 3"):
+        RecentWindow(size=2)
