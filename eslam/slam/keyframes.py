@@ -275,6 +275,12 @@ def _required(count: int, current: int) -> list[int]:
     return [current, *latest]
 
 
+def check_window_size(size: int) -> None:
+    """Raise unless a window of ``size`` keyframes can hold the current and two latest."""
+    if size < 3:
+        raise ValueError(f"window size must be >= 3 (current and two latest), got {size}")
+
+
 def _draw(pool: list[int], count: int, generator: torch.Generator | None) -> list[int]:
     """``count`` items of ``pool`` drawn at random without replacement (all if fewer)."""
     if count <= 0:
@@ -298,8 +304,7 @@ class RandomWindow:
     size: int = 20
 
     def __post_init__(self) -> None:
-        if self.size < 3:
-            raise ValueError(f"window size must be >= 3 (current and two latest), got {self.size}")
+        check_window_size(self.size)
 
     def select(
         self, store: KeyframeStore, current: int, generator: torch.Generator | None = None
@@ -333,8 +338,7 @@ class OverlapWindow:
     min_overlap: float = 0.0
 
     def __post_init__(self) -> None:
-        if self.size < 3:
-            raise ValueError(f"window size must be >= 3 (current and two latest), got {self.size}")
+        check_window_size(self.size)
         if self.samples < 1 or not 0.0 <= self.min_overlap < 1.0:
             raise ValueError("samples must be >= 1 and min_overlap in [0, 1)")
 
@@ -409,8 +413,7 @@ class RecentWindow:
     size: int = 20
 
     def __post_init__(self) -> None:
-        if self.size < 3:
-            raise ValueError(f"window size must be >= 3 (current and two latest), got {self.size}")
+        check_window_size(self.size)
 
     def select(
         self, store: KeyframeStore, current: int, generator: torch.Generator | None = None
