@@ -13,10 +13,12 @@ def test_fused_run_gives_the_reference_trajectory(tiny_sequence, tiny_run, tmp_p
     reference = run_slam(
         tiny_config(tiny_sequence, "field.plane_sampling=reference"), tmp_path / "run"
     )
-    # same maths, float32 rounding in another order (tests/field/test_fused_sampling.py
-    # holds one query equal): over 12 frames of Adam steps and chained poses that grows to
-    # millimetres (up to 3 mm on an AVX-512 CPU); a wrong sampling moves centimetres
-    difference = np.abs(np.asarray(reference.poses) - np.asarray(tiny_run.poses)).max()
-    assert difference < 5e-3, difference
+    # Same maths, float32 rounding in another order (tests/field/test_fused_sampling.py
+    # holds one query equal). Frames 1 and 2 are tracked on the first map: there the two
+    # agree to well under a micrometre. Later mapping calls' Adam steps amplify the
+    # rounding (up to 3 mm by frame 9 on an AVX-512 CPU), so the whole run is held to
+    # its ATE instead.
+    difference = np.abs(np.asarray(reference.poses) - np.asarray(tiny_run.poses))
+    assert difference[:3].max() < 1e-5, difference[:3].max()
     ate = reference.metrics["ate_rmse_cm"], tiny_run.metrics["ate_rmse_cm"]
     assert abs(ate[0] - ate[1]) < 0.05 * max(ate), ate
