@@ -403,8 +403,10 @@ class OverlapWindow:
 class RecentWindow:
     """A sliding window: the current keyframe and the latest others, ``size`` in all,
     no random draw (the local windows of keyframe odometry, e.g. DVO-SLAM's). The map is
-    then refitted to recent views only, so older ones stop pulling it towards a
-    consensus over the whole sequence (docs/results.md, 7-Scenes: "--keep").
+    refitted to recent views only: on 7-Scenes redkitchen the trajectory follows the
+    reference better from frame to frame (RPE 28 % lower) and drifts more over the
+    sequence (ATE 2.76 against 2.33 cm; docs/results.md, "The same probe with no ESLAM
+    map").
 
     Attributes:
         size: keyframes in the window, >= 3.
@@ -421,7 +423,7 @@ class RecentWindow:
         """Sorted keyframe ids: current and the latest others (``generator`` is unused)."""
         required = _required(len(store), current)
         pool = [k for k in range(len(store) - 1, -1, -1) if k not in required]
-        return sorted(required + pool[: max(self.size - len(required), 0)])
+        return sorted(required + pool[: self.size - len(required)])  # size >= 3
 
 
 def make_window_strategy(config: MappingConfig) -> WindowStrategy:
