@@ -44,6 +44,7 @@ import argparse
 import sys
 import time
 import warnings
+from collections import deque
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -406,6 +407,8 @@ def probe_reference(
     intrinsics = run.sequence.intrinsics
     generator = torch.Generator(device=device).manual_seed(seed)
     answers, residuals = [], []
+    # with keep: the depth images in the volume, oldest first (read once, taken out later)
+    held = deque([torch.as_tensor(run.sequence[0].depth, device=device)] if keep else [])
     for index in range(1, frames):
         view, depth = frame_view(run, index)
         pose = reference[index]
@@ -417,9 +420,11 @@ def probe_reference(
                 )
             )
         fuse(run.volume, depth, intrinsics, pose)
-        if keep is not None and index >= keep:
-            gone = torch.as_tensor(run.sequence[index - keep].depth, device=device)
-            fuse(run.volume, gone, intrinsics, reference[index - keep], remove=True)
+        if keep is not None:
+            held.append(depth)
+            if len(held) > keep:  # frame index - keep leaves the volume
+                gone = held.popleft()
+                fuse(run.volume, gone, intrinsics, reference[index - keep], remove=True)
     return ReferenceProbe(
         probed=torch.stack(answers).double().cpu().numpy(),
         residuals=residuals,
