@@ -6,21 +6,33 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+import yaml
 
 from eslam.config import load_config
 from eslam.data import DATASETS
 
 CONFIGS = Path(__file__).resolve().parents[1] / "eslam" / "configs"
-ALL = sorted(CONFIGS.rglob("*.yaml"))
-OVERLAYS = {"cpu.yaml"}  # an overlay with no inherit_from: loaded through others
+OVERLAYS = {"cpu.yaml"}  # overlays with no inherit_from: loaded through the configs below
+ALL = sorted(path for path in CONFIGS.rglob("*.yaml") if path.name not in OVERLAYS)
 
 
 @pytest.mark.parametrize("path", ALL, ids=[str(p.relative_to(CONFIGS)) for p in ALL])
 def test_config_loads_and_names_a_registered_layout(path: Path) -> None:
-    if path.name in OVERLAYS:
-        pytest.skip("overlay")
     config = load_config(path)
     assert config.data.format in DATASETS
+
+
+@pytest.mark.parametrize("overlay", sorted(OVERLAYS))
+def test_every_overlay_is_loaded_through_a_shipped_config(overlay: str) -> None:
+    """An overlay is tested by the configs that inherit it (above), so some must."""
+    assert (CONFIGS / overlay).is_file()
+
+    def parents(path: Path) -> list[str]:
+        named = yaml.safe_load(path.read_text()).get("inherit_from") or []
+        return [Path(entry).name for entry in ([named] if isinstance(named, str) else named)]
+
+    users = [path for path in ALL if overlay in parents(path)]
+    assert users, f"no shipped config inherits {overlay}"
 
 
 @pytest.mark.parametrize(
