@@ -402,6 +402,11 @@ class TrackingConfig:
     constant_velocity: bool = True
     """Motion model: start from the constant-velocity prediction on SE(3); off starts from
     the last pose."""
+    observed_only: bool = False
+    """Track on observed space only: a pixel whose depth point, at the motion model's
+    guess, no keyframe observed (outside every keyframe's view, or further than the
+    truncation behind its depth) is not used; there the map holds no measurement, only
+    the field's extrapolation (docs/tracking.md)."""
     render: RenderTrackerConfig = field(default_factory=RenderTrackerConfig)
     """Settings of the rendering tracker (``method: render``, and hybrid's refinement)."""
     sdf: SdfTrackerConfig = field(default_factory=SdfTrackerConfig)

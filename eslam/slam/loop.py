@@ -54,6 +54,7 @@ from eslam.slam.graphed import WindowMapper
 from eslam.slam.keyframe_views import KeyframeViews
 from eslam.slam.keyframes import KeyframeSchedule
 from eslam.slam.mapping import MappingSettings, mapping_schedule
+from eslam.slam.observed_view import observed_pixels, restrict_view
 from eslam.slam.observers import (
     FrameDone,
     LogObserver,
@@ -87,7 +88,7 @@ from eslam.slam.stops import interrupted_early, save_on_failure, stopped_error
 from eslam.slam.stream_report import StreamLog
 from eslam.slam.trackers import make_tracker, predict_pose
 from eslam.slam.tracking import TrackingQuality
-from eslam.slam.views import make_view, upload_frame
+from eslam.slam.views import View, make_view, upload_frame
 from eslam.types import Frame
 
 log = logging.getLogger("eslam")
@@ -250,6 +251,8 @@ class RunLoop:
             if has_depth and state.field is not None and len(state.keyframes) > 0:
                 rgb, depth = upload_frame(frame.rgb, frame.depth, self.device)
                 view = make_view(rgb, depth, self.directions, self.config.tracking.border)
+                if self.config.tracking.observed_only:
+                    view = self._observed_part(view, pose, index)
                 if view.sampleable_pixels() > 0:
                     result = self.tracker.track(state.field, view, pose, state.generator)
                     tracked, quality = True, result.quality
@@ -292,6 +295,18 @@ class RunLoop:
             mapping_s=done - done_tracking,
             frame=frame,
         )
+
+    def _observed_part(self, view: View, pose: torch.Tensor, index: int) -> View:
+        """``view`` restricted to the pixels in observed space (``tracking.observed_only``);
+        a frame with none left is logged (it keeps the motion model's pose)."""
+        restricted = restrict_view(view, observed_pixels(view, pose, self.state.observed_views()))
+        if restricted.sampleable_pixels() == 0 and view.sampleable_pixels() > 0:
+            self.log.warning(
+                "frame %d: none of its pixels lies in space a keyframe observed "
+                "(tracking.observed_only): not tracked, the motion model's pose is kept",
+                index,
+            )
+        return restricted
 
     def _report_degeneracy(self, index: int, quality: TrackingQuality | None) -> None:
         """Log where a stretch of degenerate views begins and ends (not every frame),
