@@ -29,8 +29,8 @@ from eslam.config import load_config
 from eslam.data import open_sequence
 from eslam.mesh.observed import ObservedViews
 from eslam.render.rays import camera_directions
-from eslam.slam.observed_view import observed_pixels, sampleable_mask
-from eslam.slam.views import make_view
+from eslam.slam.observed_view import observed_pixels
+from eslam.slam.views import make_view, sampleable_mask
 
 
 def observed_shares(

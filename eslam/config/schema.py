@@ -406,7 +406,7 @@ class TrackingConfig:
     """Track on observed space only: a pixel whose depth point, at the motion model's
     guess, no keyframe observed (outside every keyframe's view, or further than the
     truncation behind its depth) is not used; there the map holds no measurement, only
-    the field's extrapolation (docs/tracking.md)."""
+    the field's extrapolation. Off: on 7-Scenes it changed nothing (docs/tracking.md)."""
     render: RenderTrackerConfig = field(default_factory=RenderTrackerConfig)
     """Settings of the rendering tracker (``method: render``, and hybrid's refinement)."""
     sdf: SdfTrackerConfig = field(default_factory=SdfTrackerConfig)

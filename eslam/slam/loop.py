@@ -54,7 +54,7 @@ from eslam.slam.graphed import WindowMapper
 from eslam.slam.keyframe_views import KeyframeViews
 from eslam.slam.keyframes import KeyframeSchedule
 from eslam.slam.mapping import MappingSettings, mapping_schedule
-from eslam.slam.observed_view import observed_pixels, restrict_view
+from eslam.slam.observed_view import observed_pixels
 from eslam.slam.observers import (
     FrameDone,
     LogObserver,
@@ -88,7 +88,7 @@ from eslam.slam.stops import interrupted_early, save_on_failure, stopped_error
 from eslam.slam.stream_report import StreamLog
 from eslam.slam.trackers import make_tracker, predict_pose
 from eslam.slam.tracking import TrackingQuality
-from eslam.slam.views import View, make_view, upload_frame
+from eslam.slam.views import View, make_view, restrict_view, upload_frame
 from eslam.types import Frame
 
 log = logging.getLogger("eslam")

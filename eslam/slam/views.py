@@ -69,14 +69,30 @@ def make_view(
         inside = torch.zeros_like(valid)
         inside[border : height - border, border : width - border] = True
         valid &= inside
-    cumulative = torch.cumsum(valid.reshape(-1).to(torch.int64), dim=0)
-    return View(
-        rgb=rgb.reshape(-1, 3),
-        depth=torch.nan_to_num(depth, nan=0.0).reshape(-1),
-        directions=directions,
-        cumulative=cumulative,
-        count=cumulative[-1],
+    return _counted_view(
+        rgb.reshape(-1, 3), torch.nan_to_num(depth, nan=0.0).reshape(-1), directions, valid
     )
+
+
+def _counted_view(
+    rgb: torch.Tensor, depth: torch.Tensor, directions: torch.Tensor, sampleable: torch.Tensor
+) -> View:
+    """A View of (P, 3) colour, (P,) depth and (P, 3) directions whose rays are drawn
+    from the pixels where ``sampleable`` (any shape with P elements) is true."""
+    cumulative = torch.cumsum(sampleable.reshape(-1).to(torch.int64), dim=0)
+    return View(rgb, depth, directions, cumulative=cumulative, count=cumulative[-1])
+
+
+def sampleable_mask(view: View) -> torch.Tensor:
+    """(P,) bool: the pixels rays may be drawn from (where ``view.cumulative`` steps)."""
+    previous = torch.cat((view.cumulative.new_zeros(1), view.cumulative[:-1]))
+    return view.cumulative > previous
+
+
+def restrict_view(view: View, keep: torch.Tensor) -> View:
+    """``view`` with only its sampleable pixels where ``keep`` (P,) is true left
+    sampleable (same images)."""
+    return _counted_view(view.rgb, view.depth, view.directions, sampleable_mask(view) & keep)
 
 
 def pixels_from_uniforms(view: View, uniform: torch.Tensor) -> torch.Tensor:

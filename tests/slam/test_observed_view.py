@@ -6,8 +6,8 @@ import torch
 
 from eslam.mesh.observed import ObservedViews
 from eslam.render.rays import camera_directions
-from eslam.slam.observed_view import observed_pixels, restrict_view, sampleable_mask
-from eslam.slam.views import View, make_view, sample_view_pixels
+from eslam.slam.observed_view import observed_pixels
+from eslam.slam.views import View, make_view, restrict_view, sample_view_pixels, sampleable_mask
 from eslam.types import Intrinsics
 
 CAMERA = Intrinsics(width=40, height=30, fx=30.0, fy=30.0, cx=19.5, cy=14.5)
