@@ -47,8 +47,8 @@ from _machine import (
 )
 
 from eslam.config import load_config
-from eslam.slam.loop import RunResult, run_slam
 from eslam.slam.observers import FrameDone, RunObserverBase, RunStart
+from eslam.slam.session import RunResult, run_slam
 
 CONFIG = REPO / "eslam" / "configs" / "replica" / "room0.yaml"
 REPLICA_SIZE = (1200, 680)

@@ -42,7 +42,7 @@ from _machine import (
 from eslam.config import load_config
 from eslam.mesh.cull import CullCameras, CullOptions, visible_vertices
 from eslam.mesh.extract import extract_mesh
-from eslam.slam.loop import run_slam
+from eslam.slam.session import run_slam
 from eslam.slam.state import SLAMState, load_state
 from eslam.synthetic import read_synthetic_bound, write_synthetic_sequence
 from eslam.types import Intrinsics

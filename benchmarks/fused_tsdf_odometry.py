@@ -11,7 +11,8 @@ that volume from the constant-velocity guess by eslam's SDF tracker (the config'
 trackers run on the neural map; point-to-implicit residuals where KinectFusion uses
 projective point-to-plane ICP against a raycast of the same volume). No neural field,
 no mapping, no rendering. A frame the tracker reports as failed keeps the guess and is
-not fused, as the run loop does with keyframes.
+not fused, as the run loop does with keyframes; the motion model and that rule are the
+front end's own (:func:`~eslam.slam.trackers.motion_guess`, :func:`~eslam.slam.frontend.judged`).
 
 It writes ``trajectory.txt`` into ``--out`` (readable by ``eslam ate`` and
 ``benchmarks/trajectory_consistency.py``) and appends ATE RMSE, Sim(3) ATE and scale,
@@ -68,10 +69,11 @@ from eslam.data import open_sequence
 from eslam.data.base import RGBDSequence
 from eslam.evaluate.trajectory import absolute_trajectory_error
 from eslam.geometry.camera import pixels_to_camera_directions, project_points
-from eslam.geometry.pose import extrapolate_constant_velocity
 from eslam.io.trajectory import write_tum_trajectory
 from eslam.render.rays import camera_directions
+from eslam.slam.frontend import judged
 from eslam.slam.sdf_tracking import track_sdf
+from eslam.slam.trackers import motion_guess
 from eslam.slam.views import View, make_view
 from eslam.slam.warm_start import projective_tsdf
 from eslam.types import FieldOutput, Intrinsics
@@ -283,16 +285,16 @@ def fused_tsdf_odometry(
     begin = time.perf_counter()
     for index in range(1, frames):
         view, depth = frame_view(run, index)
-        guess = poses[-1]
-        if run.config.tracking.constant_velocity and len(poses) > 1:
-            guess = extrapolate_constant_velocity(poses[-2], poses[-1])
+        after_failure = bool(failed) and failed[-1] == index - 1
+        velocity = run.config.tracking.constant_velocity
+        guess = motion_guess(torch.stack(poses), velocity, after_failure)
         result = track_sdf(run.volume, view, guess, run.config.tracking.sdf, generator)
-        if result.quality is not None and result.quality.failed:
+        pose, quality = judged(result, guess)
+        poses.append(pose)
+        if quality is not None and quality.failed:
             failed.append(index)
-            poses.append(guess)
             continue
-        poses.append(result.pose)
-        fuse(run.volume, depth, run.sequence.intrinsics, result.pose)
+        fuse(run.volume, depth, run.sequence.intrinsics, pose)
     seconds = (time.perf_counter() - begin) / (frames - 1)
     estimate = torch.stack(poses).double().cpu().numpy()
     truth = run.sequence.gt_poses()

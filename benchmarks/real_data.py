@@ -61,10 +61,10 @@ from _machine import (
 )
 
 from eslam.config import load_config
-from eslam.config.schema import TRACKING_METHODS
 from eslam.evaluate.trajectory import absolute_trajectory_error
 from eslam.io.checkpoint import load_checkpoint
-from eslam.slam.loop import RunResult, run_slam
+from eslam.slam.session import RunResult, run_slam
+from eslam.slam.trackers import TRACKERS
 
 CONFIGS = REPO / "eslam" / "configs"
 
@@ -254,7 +254,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument(
         "--methods",
         nargs="+",
-        choices=list(TRACKING_METHODS),
+        choices=list(TRACKERS.names()),
         help="run each case once per tracker (default: the config's tracker, once)",
     )
     parser.add_argument("--docs", type=Path, default=DEFAULT_DOCS)

@@ -42,7 +42,7 @@ def main() -> None:
     args = parser.parse_args()
     torch.set_num_threads(1)
     from eslam.config import load_config
-    from eslam.slam.loop import run_slam
+    from eslam.slam.session import run_slam
     from eslam.workflows.demo import DEMO_CONFIG
 
     try:

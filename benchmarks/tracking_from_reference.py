@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import logging
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -62,10 +63,13 @@ from eslam.config.device import resolve_device
 from eslam.data import open_sequence
 from eslam.geometry import rotation_angle
 from eslam.io.trajectory import write_tum_trajectory
+from eslam.slam.backend import make_back_end
+from eslam.slam.context import RunContext
+from eslam.slam.frontend import TrackingFrontEnd
 from eslam.slam.loop import RunLoop
 from eslam.slam.observers import Observers
 from eslam.slam.state import SLAMState, initial_state
-from eslam.slam.trackers import Tracker
+from eslam.slam.trackers import Tracker, make_tracker
 from eslam.slam.tracking import TrackingResult
 from eslam.slam.views import View
 
@@ -207,10 +211,14 @@ def track_from_reference(
         raise SystemExit(f"{data}: needs a ground-truth pose for each of its first {frames} frames")
     device = resolve_device(device_name)
     state = initial_state(config, sequence.intrinsics, device)
-    loop = RunLoop(config, state, device, Observers([]), str(data))
+    context = RunContext.build(
+        config, device, sequence.intrinsics, Observers([]), logging.getLogger("eslam"), str(data)
+    )
     reference_poses = torch.as_tensor(reference[:frames], dtype=torch.float32, device=device)
-    tracker = ReferenceUntil(reference_poses, switch, state, loop.tracker, probe)
-    loop.tracker = tracker
+    tracker = ReferenceUntil(reference_poses, switch, state, make_tracker(config), probe)
+    loop = RunLoop(
+        state, TrackingFrontEnd(context, tracker=tracker), make_back_end(context), context.observers
+    )
     loop.run((sequence[i] for i in range(frames)), frames, None)
     spent = np.add(state.tracking_time[switch:], state.mapping_time[switch:])
     probed = None

@@ -3,7 +3,7 @@
 The public API, imported on first use (a module ``__getattr__``, PEP 562), so nothing
 runs on import and ``import eslam`` does not import torch:
 
-- ``run_slam(config, out_dir)``: run on a sequence, write a run folder (eslam.slam.loop);
+- ``run_slam(config, out_dir)``: run on a sequence, write a run folder (eslam.slam.session);
 - ``load_config(path, overrides)``: a checked, fully resolved config (eslam.config);
 - ``open_sequence(config.data)``: the frames of a dataset folder (eslam.data);
 - ``load_run(run_dir)``: a run folder read back (eslam.io.saved_run).
@@ -18,7 +18,7 @@ if TYPE_CHECKING:
     from eslam.config import load_config
     from eslam.data import open_sequence
     from eslam.io.saved_run import load_run
-    from eslam.slam.loop import run_slam
+    from eslam.slam.session import run_slam
 
 __version__ = "0.1.0"
 
@@ -26,7 +26,7 @@ _HOMES = {
     "load_config": "eslam.config",
     "load_run": "eslam.io.saved_run",
     "open_sequence": "eslam.data",
-    "run_slam": "eslam.slam.loop",
+    "run_slam": "eslam.slam.session",
 }
 """The module each public name is imported from on first use."""
 

@@ -155,7 +155,7 @@ def _print_metrics(result) -> None:
 def _command_run(args: argparse.Namespace) -> int:
     from eslam.config import load_config
     from eslam.io.run_dir import default_run_name
-    from eslam.slam.loop import run_slam
+    from eslam.slam.session import run_slam
 
     overrides = list(args.overrides)
     if args.data is not None:
@@ -227,7 +227,7 @@ def _command_resume(args: argparse.Namespace) -> int:
     from eslam.config import load_config
     from eslam.errors import InputError
     from eslam.io.run_dir import RunDirectory
-    from eslam.slam.loop import run_slam
+    from eslam.slam.session import run_slam
 
     run = RunDirectory(Path(args.run_dir))
     if not run.config.is_file():

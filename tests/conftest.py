@@ -38,6 +38,20 @@ def real_data() -> Path:
     return path
 
 
+@pytest.fixture
+def register():
+    """``register(registry, name, factory, **entry)``: add an entry for this test only."""
+    added = []
+
+    def add(registry, name: str, factory, **entry) -> None:
+        registry.register(name, factory, **entry)
+        added.append((registry, name))
+
+    yield add
+    for registry, name in reversed(added):
+        registry.unregister(name)
+
+
 TINY = list(TINY_SETTINGS)
 """Settings small enough for CI (2 cores): :data:`eslam.testing.tiny.TINY_SETTINGS`."""
 
@@ -70,7 +84,7 @@ def tiny_config(sequence: Path, *extra: str):
 @pytest.fixture(scope="session")
 def tiny_run(tiny_sequence: Path, tmp_path_factory: pytest.TempPathFactory):
     """One uninterrupted run on the tiny sequence (the reference other tests compare to)."""
-    from eslam.slam.loop import run_slam
+    from eslam.slam.session import run_slam
 
     return run_slam(tiny_config(tiny_sequence), tmp_path_factory.mktemp("tiny_run") / "run")
 

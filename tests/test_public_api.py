@@ -26,7 +26,7 @@ def test_public_names_come_from_their_modules() -> None:
     from eslam.config import load_config
     from eslam.data import open_sequence
     from eslam.io.saved_run import load_run
-    from eslam.slam.loop import run_slam
+    from eslam.slam.session import run_slam
 
     assert eslam.__all__ == ["load_config", "load_run", "open_sequence", "run_slam"]
     assert eslam.load_config is load_config

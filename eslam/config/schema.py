@@ -385,10 +385,6 @@ class HybridTrackerConfig:
         _positive(self, "lr_factor")
 
 
-TRACKING_METHODS = ("render", "sdf", "hybrid")
-"""Tracker names ``tracking.method`` takes (each a module behind the tracker protocol)."""
-
-
 @dataclass
 class TrackingConfig:
     """Camera tracking, once per frame (docs/method.md section 4)."""
@@ -438,6 +434,9 @@ MOVED_KEYS = {
 class MappingConfig:
     """Joint optimisation of map and keyframe poses (docs/method.md section 5; Replica values)."""
 
+    back_end: Literal["keyframes"] = "keyframes"
+    """Mapping back end (eslam/slam/backend.py): keyframes = the paper's (a keyframe every
+    ``every`` frames, mapped with a window of earlier ones)."""
     every: int = 4
     """Map every k-th frame (plus the last); every mapped frame becomes a keyframe."""
     window: int = 20

@@ -1,5 +1,9 @@
-"""SLAM: keyframes and window selection, tracking, mapping, run state and the run loop.
+"""SLAM: the run loop and its components.
 
-``slam/loop.py`` alone orchestrates; the other modules are called from it and know
-nothing of each other's internals.
+``slam/session.py`` wires a run (config, input, run folder, observers, components);
+``slam/loop.py`` sequences its frames through the tracking front end
+(``slam/frontend.py``: view filters, tracker, judgement, motion model) and the mapping
+back end (``slam/backend.py``: keyframes, bound growth, window, mapper). Each
+component is chosen by name from a registry (:class:`eslam.registry.Registry`) and
+keeps its state in the run's :class:`~eslam.slam.state.SLAMState`.
 """

@@ -25,6 +25,7 @@ import torch
 
 from eslam.config import MappingConfig
 from eslam.geometry.camera import pixels_to_camera_directions
+from eslam.registry import Registry
 from eslam.slam.trajectory import Trajectory
 from eslam.types import Frame, Intrinsics
 
@@ -426,12 +427,13 @@ class RecentWindow:
         return sorted(required + pool[: self.size - len(required)])  # size >= 3
 
 
+WINDOWS: Registry[WindowStrategy] = Registry("window strategy", "mapping.selection")
+"""Window strategies by ``mapping.selection``; a factory takes the window's size."""
+WINDOWS.register("random", RandomWindow)
+WINDOWS.register("overlap", OverlapWindow)
+WINDOWS.register("recent", RecentWindow)
+
+
 def make_window_strategy(config: MappingConfig) -> WindowStrategy:
     """The window policy ``config.selection`` names, of ``config.window`` keyframes."""
-    if config.selection == "random":
-        return RandomWindow(config.window)
-    if config.selection == "overlap":
-        return OverlapWindow(config.window)
-    if config.selection == "recent":
-        return RecentWindow(config.window)
-    raise ValueError(f"selection must be 'random', 'overlap' or 'recent', got '{config.selection}'")
+    return WINDOWS.make(config.selection, config.window)

@@ -5,7 +5,7 @@ after each iteration of a mapping call, after each mapping call, at the finish a
 failure; observers never change the run. The run writer
 (:mod:`eslam.slam.run_writer`), the progress bar (:mod:`eslam.slam.progress`) and the
 log lines (:class:`LogObserver`) are observers; a viewer or a live trajectory stream are
-more of them, passed to :func:`eslam.slam.loop.run_slam` as ``observers=``.
+more of them, passed to :func:`eslam.slam.session.run_slam` as ``observers=``.
 
 Events carry device tensors as they are (no copies, no host syncs): an observer that
 needs numbers on the host pays for the transfer itself.
@@ -67,6 +67,9 @@ class FrameDone:
         tracking_s / mapping_s: wall time of each part, seconds (device work included).
         frame: the input frame itself (host images, camera, ground truth), for observers
             that show it (a viewer); None where a sender has none to give.
+        has_depth: whether the frame had any valid depth (none: not tracked or mapped).
+        emptied_by: the view filter that left the frame no pixel to track on (it kept
+            the motion model's pose), else None.
     """
 
     index: int
@@ -77,6 +80,13 @@ class FrameDone:
     tracking_s: float
     mapping_s: float
     frame: Frame | None = None
+    has_depth: bool = True
+    emptied_by: str | None = None
+
+    @property
+    def failed(self) -> bool:
+        """Whether the tracker judged the frame failed."""
+        return self.quality is not None and self.quality.failed
 
 
 @dataclass(frozen=True, eq=False)
@@ -227,7 +237,7 @@ class Observers(RunObserverBase):
 
 class LogObserver(RunObserverBase):
     """The run's own log lines (start, mapping calls, end, failure) on the run's logger
-    (:func:`eslam.slam.loop.run_log`: log.txt at INFO, whatever level "eslam" has)."""
+    (:func:`eslam.slam.session.run_log`: log.txt at INFO, whatever level "eslam" has)."""
 
     def __init__(self, logger: logging.Logger) -> None:
         self.log = logger

@@ -14,6 +14,7 @@ so a checkpoint written after a failure holds exactly the completed frames.
 
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -47,8 +48,9 @@ class SLAMState:
             trackers that judge themselves, NaNs otherwise.
         last_mapped: whether the last processed frame needs no mapping at the end of the
             stream (it is a keyframe, or has no depth, or no frame was processed).
-        bound_warned: whether the run warned about depth points outside the bound
-            (once per run; not saved, so a resumed run may warn once more).
+        components: the state of the run's components (the mapping back end's, a
+            custom front end's, ...) by component name: plain values (numbers, strings,
+            lists, dicts, tensors), checkpointed and rolled back with the frame.
     """
 
     field: SceneField | None
@@ -60,7 +62,7 @@ class SLAMState:
     mapping_time: list[float] = field(default_factory=list)
     tracking_quality: list[list[float]] = field(default_factory=list)
     last_mapped: bool = True
-    bound_warned: bool = False
+    components: dict[str, dict] = field(default_factory=dict)
 
     @property
     def next_frame(self) -> int:
@@ -91,7 +93,12 @@ class SLAMState:
             keyframes=len(self.keyframes),
             generator=self.generator.get_state(),
             last_mapped=self.last_mapped,
+            components=copy.deepcopy(self.components),
         )
+
+    def component(self, name: str) -> dict:
+        """The state dict of component ``name`` (created empty on first use)."""
+        return self.components.setdefault(name, {})
 
     def rollback(self, mark: FrameMark, field_before: SceneField | None) -> None:
         """Undo everything after ``mark``; ``field_before`` is the field as it was then
@@ -103,6 +110,7 @@ class SLAMState:
         del self.mapping_time[mark.frames :]
         del self.tracking_quality[mark.frames :]
         self.last_mapped = mark.last_mapped
+        self.components = copy.deepcopy(mark.components)
         if field_before is not None:
             self.field = field_before
 
@@ -115,6 +123,7 @@ class FrameMark:
     keyframes: int
     generator: torch.Tensor
     last_mapped: bool
+    components: dict[str, dict]
 
 
 TRACKING_COLUMNS = (
@@ -146,6 +155,11 @@ def quality_row(quality: TrackingQuality | None) -> list[float]:
 
 _FAILED = TRACKING_COLUMNS.index("tracking_failed")
 _DEGENERATE = TRACKING_COLUMNS.index("tracking_degenerate_directions")
+
+
+def failed_row(row: list[float]) -> bool:
+    """Whether a quality row is a frame its tracker judged failed."""
+    return row[_FAILED] == 1
 
 
 def degenerate_row(row: list[float]) -> bool:
@@ -216,6 +230,7 @@ def save_state(path: Path, state: SLAMState) -> None:
             "mapping_time": list(state.mapping_time),
             "tracking_quality": [list(row) for row in state.tracking_quality],
             "last_mapped": state.last_mapped,
+            "components": state.components,
         },
     )
 
@@ -248,6 +263,7 @@ def load_state(path: Path, config: ESLAMConfig, device: torch.device) -> SLAMSta
             mapping_time=list(saved["mapping_time"]),
             tracking_quality=quality_rows(saved["tracking_quality"]),
             last_mapped=bool(saved["last_mapped"]),
+            components=dict(saved.get("components", {})),  # none before they were saved
         )
     except (KeyError, RuntimeError, ValueError) as error:
         raise InputError(

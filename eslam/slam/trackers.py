@@ -1,22 +1,21 @@
 """The tracker seam: the protocol every tracker implements, the registry behind
 ``tracking.method``, and the motion model that gives each frame its starting pose.
 
-A new tracker is a module with a class that has ``track(field, view, initial_pose,
-generator)``, plus one entry in :data:`TRACKERS` (and its name in the config's
+A new tracker is a class with ``track(field, view, initial_pose, generator)``,
+registered in :data:`TRACKERS` (a built-in one's name is also in the config's
 ``tracking.method``); the run loop does not change.
 """
 
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable
 from typing import Protocol
 
 import torch
 
-from eslam.config import ESLAMConfig
-from eslam.errors import ConfigError
+from eslam.config import ESLAMConfig, HybridTrackerConfig, RenderTrackerConfig, SdfTrackerConfig
 from eslam.geometry.pose import extrapolate_constant_velocity
+from eslam.registry import Registry
 from eslam.render.renderer import SceneFieldLike
 from eslam.slam.graphed import GraphedRenderTracker
 from eslam.slam.sdf_tracking import HybridTracker, SdfTracker
@@ -74,24 +73,20 @@ def _hybrid_tracker(config: ESLAMConfig) -> HybridTracker:
     return HybridTracker(_sdf_tracker(config), _renderer(config, settings))
 
 
-TRACKERS: dict[str, Callable[[ESLAMConfig], Tracker]] = {
-    "render": _render_tracker,
-    "sdf": _sdf_tracker,
-    "hybrid": _hybrid_tracker,
-}
-"""Tracker factory of each ``tracking.method``."""
+TRACKERS: Registry[Tracker] = Registry("tracker", "tracking.method")
+"""Trackers by ``tracking.method``; a factory takes the run's config."""
+TRACKERS.register("render", _render_tracker, config=RenderTrackerConfig)
+TRACKERS.register("sdf", _sdf_tracker, config=SdfTrackerConfig)
+TRACKERS.register("hybrid", _hybrid_tracker, config=HybridTrackerConfig)
 
 
 def make_tracker(config: ESLAMConfig) -> Tracker:
-    """The tracker ``config.tracking.method`` names, built from its config section."""
-    try:
-        factory = TRACKERS[config.tracking.method]
-    except KeyError:
-        choices = ", ".join(sorted(TRACKERS))
-        raise ConfigError(
-            f"unknown tracking.method '{config.tracking.method}' (choose one of: {choices})"
-        ) from None
-    return factory(config)
+    """The tracker ``config.tracking.method`` names, built from its config section.
+
+    Raises:
+        ConfigError: no tracker has that name.
+    """
+    return TRACKERS.make(config.tracking.method, config)
 
 
 def predict_pose(poses: torch.Tensor, constant_velocity: bool) -> torch.Tensor:
@@ -105,3 +100,10 @@ def predict_pose(poses: torch.Tensor, constant_velocity: bool) -> torch.Tensor:
     if constant_velocity and len(poses) >= 2:
         return extrapolate_constant_velocity(poses[-2], poses[-1])
     return poses[-1]
+
+
+def motion_guess(poses: torch.Tensor, constant_velocity: bool, after_failure: bool) -> torch.Tensor:
+    """The next frame's starting pose as the run takes it: :func:`predict_pose`, holding
+    still (no velocity) right after a failed frame, whose pose is a guess and not
+    evidence of motion."""
+    return predict_pose(poses, constant_velocity and not after_failure)

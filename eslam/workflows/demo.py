@@ -13,7 +13,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from eslam.config import ESLAMConfig, load_config
-from eslam.slam.loop import run_slam
+from eslam.slam.session import run_slam
 from eslam.synthetic import SynthConfig, read_synthetic_bound, write_synthetic_sequence
 from eslam.workflows.evaluate_run import EvaluationOptions, evaluate_run
 

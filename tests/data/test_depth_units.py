@@ -23,7 +23,7 @@ from eslam.data.inspect import inspect_sequence
 from eslam.data.replica import write_replica_sequence
 from eslam.data.source import IterableSource
 from eslam.errors import InputError, RunStopped
-from eslam.slam.loop import preflight, run_slam
+from eslam.slam.session import preflight, run_slam
 from eslam.synthetic import SynthConfig, generate_sequence, read_synthetic_bound
 from eslam.workflows.demo import DEMO_CONFIG
 from tests.conftest import TINY
@@ -139,7 +139,7 @@ def test_data_depth_check_false_lets_a_close_range_capture_run(
     depth_over_ten: Path, tmp_path: Path
 ) -> None:
     from eslam.config import load_config
-    from eslam.slam.loop import run_slam
+    from eslam.slam.session import run_slam
 
     overrides = [f"data.path={depth_over_ten}", *TINY, "output.mesh=false"]
     config = load_config(DEMO_CONFIG, [*overrides, "data.depth_check=false"])

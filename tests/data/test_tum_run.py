@@ -12,7 +12,7 @@ from eslam.config import load_config
 from eslam.data.tum import TUM_CAMERAS
 from eslam.geometry.pose import pose_distance
 from eslam.io.trajectory import read_tum_trajectory
-from eslam.slam.loop import run_slam
+from eslam.slam.session import run_slam
 from eslam.synthetic import (
     FPS,
     SynthConfig,

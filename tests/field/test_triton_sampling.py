@@ -23,7 +23,7 @@ from eslam.field import triton_sampling
 from eslam.field.planes import plane_shapes, sample_planes_reference, to_window
 from eslam.field.scene_field import SceneField
 from eslam.field.triton_sampling import check_device, sample_levels_triton
-from eslam.slam.loop import run_slam
+from eslam.slam.session import run_slam
 
 CUDA = pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA device")
 DEVICES = ["cpu", pytest.param("cuda", marks=CUDA)]

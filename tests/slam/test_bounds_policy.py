@@ -17,7 +17,7 @@ from eslam.errors import InputError
 from eslam.geometry.bounds import depth_points, fraction_outside
 from eslam.io.checkpoint import load_checkpoint
 from eslam.slam.bounds_policy import bound_from_frame, check_depth_found, check_some_depth
-from eslam.slam.loop import run_slam
+from eslam.slam.session import run_slam
 from eslam.synthetic import read_synthetic_bound
 from eslam.workflows.demo import DEMO_CONFIG
 from tests.conftest import TINY as LOOP_TINY

@@ -20,10 +20,10 @@ from eslam.io.trajectory import read_tum_trajectory
 from eslam.render.rays import camera_directions
 from eslam.slam.keyframe_views import KeyframeViews, view_bytes
 from eslam.slam.keyframes import KeyframeStore
-from eslam.slam.loop import run_slam
 from eslam.slam.observers import FrameDone, MappingStep, RunObserverBase
 from eslam.slam.progress import ProgressObserver
 from eslam.slam.run_writer import WallTime, speed_metrics
+from eslam.slam.session import run_slam
 from eslam.slam.stops import stopped_error
 from eslam.slam.trajectory import Trajectory
 from eslam.slam.views import make_view

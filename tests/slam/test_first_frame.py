@@ -21,8 +21,8 @@ import torch
 from eslam.config import ESLAMConfig, load_config
 from eslam.render.held_out import HeldOutErrors, held_out_errors
 from eslam.render.rays import camera_directions
-from eslam.slam.loop import run_slam
 from eslam.slam.mapping import MappingSchedule, MappingSettings, map_window, mapping_schedule
+from eslam.slam.session import run_slam
 from eslam.slam.state import new_field
 from eslam.slam.views import make_view
 from eslam.slam.warm_start import WarmStart

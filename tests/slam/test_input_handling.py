@@ -14,7 +14,7 @@ from eslam.cli import EXIT_USER_ERROR, main
 from eslam.config import load_config
 from eslam.data.replica import write_replica_sequence
 from eslam.io.trajectory import read_tum_trajectory
-from eslam.slam.loop import run_slam
+from eslam.slam.session import run_slam
 from eslam.synthetic import (
     SynthConfig,
     build_scene,

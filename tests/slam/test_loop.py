@@ -12,7 +12,7 @@ import pytest
 from eslam.cli import EXIT_USER_ERROR, main
 from eslam.config import ESLAMConfig, load_config
 from eslam.io.trajectory import read_tum_trajectory
-from eslam.slam.loop import run_slam
+from eslam.slam.session import run_slam
 from eslam.workflows.demo import DEMO_CONFIG
 from tests.conftest import TINY_FRAMES, tiny_config
 

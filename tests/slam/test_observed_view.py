@@ -95,7 +95,8 @@ def test_a_run_tracks_each_frame_on_its_observed_part(
     """With ``tracking.observed_only`` every tracked frame's view is restricted (some
     frames lose the pixels that came into view since the last keyframe) and the run
     still tracks the synthetic camera."""
-    import eslam.slam.loop as loop
+    import eslam.slam.frontend as frontend
+    from eslam.slam.session import run_slam
     from tests.conftest import TINY_FRAMES, tiny_config
 
     counts: list[tuple[int, int]] = []
@@ -105,9 +106,9 @@ def test_a_run_tracks_each_frame_on_its_observed_part(
         counts.append((view.sampleable_pixels(), restricted.sampleable_pixels()))
         return restricted
 
-    monkeypatch.setattr(loop, "restrict_view", recording)
+    monkeypatch.setattr(frontend, "restrict_view", recording)
     config = tiny_config(tiny_sequence, "tracking.observed_only=true")
-    run = loop.run_slam(config, tmp_path / "run")
+    run = run_slam(config, tmp_path / "run")
     assert len(counts) == TINY_FRAMES - 1
     assert all(0 < after <= before for before, after in counts)
     assert any(after < before for before, after in counts)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from eslam.slam.loop import run_slam
+from eslam.slam.session import run_slam
 from tests.conftest import tiny_config
 
 

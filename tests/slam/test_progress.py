@@ -11,9 +11,9 @@ import torch
 import tqdm.std
 
 from eslam.errors import RunInterrupted
-from eslam.slam.loop import run_slam
 from eslam.slam.observers import FrameDone, MappingStep, RunObserverBase, RunStart
 from eslam.slam.progress import ProgressObserver
+from eslam.slam.session import run_slam
 from tests.conftest import tiny_config
 
 FIRST_ITERATIONS = 20

@@ -11,7 +11,7 @@ import yaml
 from eslam.cli import main
 from eslam.config import DataConfig, load_config
 from eslam.data import open_sequence
-from eslam.slam.loop import run_slam
+from eslam.slam.session import run_slam
 from eslam.synthetic import read_synthetic_bound
 from eslam.testing.recordings import BagLayout, write_ros_bag
 from eslam.workflows.demo import DEMO_CONFIG

@@ -19,7 +19,8 @@ from eslam.cli import EXIT_INTERRUPTED, EXIT_USER_ERROR, main
 from eslam.config import load_config
 from eslam.errors import InputError, RunInterrupted
 from eslam.io.run_lock import LOCK_NAME, acquire, release
-from eslam.slam.loop import RunLoop, run_slam
+from eslam.slam.loop import RunLoop
+from eslam.slam.session import run_slam
 from eslam.synthetic import SynthConfig, read_synthetic_bound, write_synthetic_sequence
 from eslam.workflows.demo import DEMO_CONFIG
 from tests.conftest import TINY, TINY_FRAMES, tiny_config

@@ -23,8 +23,8 @@ from eslam.errors import ConfigError, RunInterrupted, RunStopped
 from eslam.geometry.pose import se3_exp
 from eslam.io.checkpoint import load_checkpoint
 from eslam.io.trajectory import read_tum_trajectory
-from eslam.slam.loop import run_slam
 from eslam.slam.observers import FrameDone, MappingDone, RunEnd, RunObserverBase, RunStart
+from eslam.slam.session import run_slam
 from eslam.slam.trackers import TRACKERS, make_tracker
 from eslam.slam.tracking import TrackingQuality, TrackingResult
 from eslam.workflows.demo import DEMO_CONFIG
@@ -158,7 +158,7 @@ def test_a_run_leaves_no_process_wide_state(tiny_sequence: Path, tmp_path: Path)
     script = (
         "import sys, numpy as np\n"
         "from eslam.config import load_config\n"
-        "from eslam.slam.loop import run_slam\n"
+        "from eslam.slam.session import run_slam\n"
         "r = run_slam(load_config(sys.argv[1]), sys.argv[2])\n"
         "np.save(sys.argv[3], r.poses)\n"
     )
@@ -184,9 +184,9 @@ class StandingStill:
 
 
 def test_a_new_tracker_plugs_in_and_a_dead_one_is_caught(
-    tiny_sequence: Path, tiny_run, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+    tiny_sequence: Path, tiny_run, tmp_path: Path, register
 ) -> None:
-    monkeypatch.setitem(TRACKERS, "still", lambda config: StandingStill())
+    register(TRACKERS, "still", lambda config: StandingStill())
     config = tiny_config(tiny_sequence, "output.mesh=false")
     config = dataclasses.replace(
         config,
@@ -212,7 +212,7 @@ class FailsEveryOther:
     by the rendering tracker."""
 
     def __init__(self, config) -> None:
-        self.real = TRACKERS["render"](config)
+        self.real = TRACKERS.make("render", config)
         self.calls = 0
 
     def track(self, field, view, initial_pose, generator):
@@ -226,9 +226,9 @@ class FailsEveryOther:
 
 
 def test_a_failed_frame_keeps_the_prediction_and_is_no_keyframe(
-    tiny_sequence: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+    tiny_sequence: Path, tmp_path: Path, register
 ) -> None:
-    monkeypatch.setitem(TRACKERS, "flaky", FailsEveryOther)
+    register(TRACKERS, "flaky", FailsEveryOther)
     config = tiny_config(tiny_sequence, "output.mesh=false", "mapping.every=1")
     config = dataclasses.replace(
         config, tracking=dataclasses.replace(config.tracking, method="flaky")
@@ -258,7 +258,7 @@ class DegenerateStretch:
     tracked = 0
 
     def __init__(self, config) -> None:
-        self.real = TRACKERS["render"](config)
+        self.real = TRACKERS.make("render", config)
 
     def track(self, field, view, initial_pose, generator):
         DegenerateStretch.tracked += 1  # call k tracks frame k
@@ -271,9 +271,9 @@ class DegenerateStretch:
 
 @pytest.mark.parametrize("stop_after", [None, 4])
 def test_degenerate_views_are_counted_and_logged_once_per_stretch(
-    tiny_sequence: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, stop_after
+    tiny_sequence: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, register, stop_after
 ) -> None:
-    monkeypatch.setitem(TRACKERS, "degenerate", DegenerateStretch)
+    register(TRACKERS, "degenerate", DegenerateStretch)
     monkeypatch.setattr(DegenerateStretch, "tracked", 0)
     config = tiny_config(tiny_sequence, "output.mesh=false")
     config = dataclasses.replace(
@@ -336,9 +336,7 @@ class KeepsThePrediction:
         return TrackingResult(pose, torch.zeros(()), TrackingQuality(3, 0.9, 0.005, False))
 
 
-def test_a_run_of_predicted_poses_stays_rigid(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
-) -> None:
+def test_a_run_of_predicted_poses_stays_rigid(tmp_path: Path, register) -> None:
     """Each prediction extrapolates two poses that were predictions too: over 40 frames
     they must stay rigid and keep the first step's motion (the product R_k R_(k-1)^T R_k
     once multiplied float32's orthonormality error by ~2.4 a frame, and the `sdf`
@@ -347,7 +345,7 @@ def test_a_run_of_predicted_poses_stays_rigid(
 
     frames = 44
     write_synthetic_sequence(tmp_path / "data", SynthConfig(frames=frames, width=40, height=30))
-    monkeypatch.setitem(TRACKERS, "predicted", KeepsThePrediction)
+    register(TRACKERS, "predicted", KeepsThePrediction)
     # mapping must not refine the poses: they are made up, not what the images show
     config = tiny_config(tmp_path / "data", "output.mesh=false", "mapping.optimise_poses=false")
     config = dataclasses.replace(

@@ -1,0 +1,209 @@
+"""The mapping back end: which frames become keyframes, and the mapping call on each.
+
+:class:`KeyframeBackEnd` (``mapping.back_end: keyframes``, the paper's) builds the
+field from the first frame with depth (when ``scene.bound`` is not set), makes every
+``mapping.every``-th tracked frame a keyframe, grows the bound to hold its depth
+(:func:`~eslam.slam.bounds_policy.cover_keyframe`), chooses the window
+(``mapping.selection``), keeps the window's oldest keyframe fixed, and runs the mapper
+(eager, or CUDA-graphed with ``compute.cuda_graphs``: :class:`~eslam.slam.graphed.WindowMapper`).
+At the end of the stream its last frame is mapped too. Mapping calls are reported to
+the run's observers.
+
+Its state between frames lives in the run's :class:`~eslam.slam.state.SLAMState`
+(the keyframes, the window strategy, and ``components["back_end"]``: whether the bound
+warning was given), so it is checkpointed and rolled back with the frame. Within a
+frame it keeps a copy of the field and the poses from before its mapping call, to undo
+the call when the frame fails half way (:meth:`KeyframeBackEnd.rollback`).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Protocol
+
+import torch
+
+from eslam.data.depth_units import DepthCheck
+from eslam.errors import InputError
+from eslam.field.scene_field import SceneField
+from eslam.registry import Registry
+from eslam.slam.bounds_policy import (
+    bound_from_frame,
+    check_depth_found,
+    check_some_depth,
+    cover_keyframe,
+)
+from eslam.slam.context import RunContext
+from eslam.slam.frontend import TrackedFrame
+from eslam.slam.graphed import WindowMapper
+from eslam.slam.keyframe_views import KeyframeViews
+from eslam.slam.keyframes import KeyframeSchedule
+from eslam.slam.mapping import MappingSettings, mapping_schedule
+from eslam.slam.observers import MappingDone, MappingStep
+from eslam.slam.state import FrameMark, SLAMState, new_field
+from eslam.types import Frame
+
+
+class BackEnd(Protocol):
+    """Builds and refines the map in ``state`` from tracked frames (module doc)."""
+
+    def begin_frame(self) -> None:
+        """A frame starts (forget what the last frame's :meth:`rollback` would undo)."""
+        ...
+
+    def add(
+        self, frame: Frame, index: int, tracked: TrackedFrame, state: SLAMState, total: int | None
+    ) -> bool:
+        """Frame ``index`` (``total`` in the run, None if unknown), tracked as ``tracked``
+        and already appended to ``state``'s trajectory: map it if it is a keyframe.
+        Returns whether it was mapped."""
+        ...
+
+    def finish(self, state: SLAMState, last: Frame | None) -> None:
+        """The stream ended with ``last`` (frame ``state.next_frame - 1``): map what is
+        left to map."""
+        ...
+
+    def rollback(self, state: SLAMState, mark: FrameMark) -> None:
+        """Undo the frame begun at ``mark`` (its mapping call included)."""
+        ...
+
+
+class KeyframeBackEnd:
+    """The paper's back end (module doc)."""
+
+    def __init__(self, context: RunContext) -> None:
+        config = context.config
+        self.context = context
+        self.schedule = KeyframeSchedule(config.mapping.every)
+        self.mapping = MappingSettings(config.mapping, config.render, config.loss)
+        self.mapper = WindowMapper(self.mapping, config.compute.cuda_graphs)
+        self.views: KeyframeViews | None = None
+        # no scene bound: one set too small is grown (or, growth off, warned about), a
+        # matter of the bound and not of depth units
+        self.depth_check = DepthCheck.for_run(
+            config.data.depth_scale, bound=None, enabled=config.data.depth_check
+        )
+        self._before: tuple[dict[str, torch.Tensor], torch.Tensor] | None = None
+
+    def begin_frame(self) -> None:
+        self._before = None
+
+    def add(
+        self, frame: Frame, index: int, tracked: TrackedFrame, state: SLAMState, total: int | None
+    ) -> bool:
+        if not tracked.has_depth:
+            check_some_depth(index, total, len(state.keyframes), self.context.source)
+        if state.field is None:
+            self._create_field(frame, index, tracked.has_depth, state)
+        mapped = not tracked.failed and self.schedule.is_keyframe(
+            index, tracked.has_depth, len(state.keyframes)
+        )
+        if mapped:
+            self.map_frame(frame, index, state)
+        state.last_mapped = mapped or tracked.failed or not tracked.has_depth
+        return mapped
+
+    def finish(self, state: SLAMState, last: Frame | None) -> None:
+        if state.last_mapped:
+            return
+        if last is None:
+            raise InputError(
+                Path(self.context.source),
+                "the last frame of the stream must be mapped, but it is no longer available",
+                "start the run again",
+            )
+        self.map_frame(last, state.next_frame - 1, state)
+        state.last_mapped = True
+
+    def rollback(self, state: SLAMState, mark: FrameMark) -> None:
+        field_before = None
+        if self._before is not None:
+            field_state, poses = self._before
+            config = self.context.config.field
+            field_before = SceneField.from_state(config, field_state).to(self.context.device)
+            state.trajectory.set_poses(list(range(len(poses))), poses)
+        state.rollback(mark, field_before)
+        if self.views is not None:
+            self.views.forget_from(mark.keyframes)
+        self._before = None
+
+    def _create_field(self, frame: Frame, index: int, has_depth: bool, state: SLAMState) -> None:
+        """Build the field from the first frame with depth, seen from frame 0's pose
+        (every frame before it had none: the field is built from the first that has)."""
+        if not has_depth:
+            check_depth_found(index + 1, self.context.source)
+            return
+        first = state.trajectory.poses[0]
+        bound = bound_from_frame(self.context.config.scene, frame, first, self.context.logger)
+        state.field = new_field(self.context.config, bound, self.context.device)
+
+    def _views(self, state: SLAMState) -> KeyframeViews:
+        if self.views is None:
+            cache_mb = self.context.config.mapping.view_cache_mb
+            directions = self.context.directions
+            self.views = KeyframeViews(state.keyframes, directions, self.context.device, cache_mb)
+        return self.views
+
+    def map_frame(self, frame: Frame, index: int, state: SLAMState) -> None:
+        """Make frame ``index`` a keyframe and run one mapping call on its window."""
+        field = state.field
+        if field is None:
+            raise RuntimeError("mapping before the field exists")
+        config, source = self.context.config, self.context.source
+        # a wrong depth unit mid-stream (a live source, a mixed folder) must not be mapped
+        self.depth_check.check(frame.depth, source, f"frame {index} (a keyframe)")
+        self._before = (
+            {k: v.detach().clone() for k, v in field.state_dict().items()},
+            state.trajectory.poses.clone(),
+        )
+        store = state.keyframes
+        current = store.add(frame, index)
+        own = state.component("back_end")
+        own["bound_warned"] = cover_keyframe(
+            field,
+            store.depth(current, self.context.device),
+            store.intrinsics,
+            state.trajectory.poses[index],
+            config.scene,
+            state.generator,
+            bool(own.get("bound_warned", False)),
+            self.context.logger,
+        )
+        window = state.window.select(store, current, state.generator)
+        views = self._views(state).views(window)
+        frame_of = store.frame_indices
+        oldest = min(window, key=lambda k: frame_of[k])
+        optimise = [config.mapping.optimise_poses and k != oldest for k in window]
+        first = len(store) == 1
+        schedule = mapping_schedule(config.mapping, first=first)
+        observers = self.context.observers
+
+        def progress(done: int) -> None:
+            observers.on_mapping_step(MappingStep(index, done, schedule.iterations, first))
+
+        progress(0)
+        result = self.mapper.map(
+            field,
+            views,
+            store.poses[window].to(self.context.device),
+            optimise,
+            schedule,
+            generator=state.generator,
+            on_step=progress,
+        )
+        moved = [i for i, flag in enumerate(optimise) if flag]
+        if moved:
+            state.trajectory.set_poses([frame_of[window[i]] for i in moved], result.poses[moved])
+        window_frames = tuple(frame_of[k] for k in window)
+        observers.on_mapping(MappingDone(index, window_frames, schedule.iterations, result.loss))
+
+
+BACK_ENDS: Registry[BackEnd] = Registry("mapping back end", "mapping.back_end")
+"""Mapping back ends by ``mapping.back_end``; a factory takes the run's :class:`RunContext`."""
+BACK_ENDS.register("keyframes", KeyframeBackEnd)
+
+
+def make_back_end(context: RunContext) -> BackEnd:
+    """The back end ``mapping.back_end`` names, built for ``context``."""
+    return BACK_ENDS.make(context.config.mapping.back_end, context)

@@ -1,0 +1,83 @@
+"""What a frame's tracking says in the run's log: frames without depth, failed frames,
+frames a view filter emptied, and where a stretch of degenerate views begins and ends.
+
+:class:`FrameLogObserver` reads each :class:`~eslam.slam.observers.FrameDone`; the
+front end and the loop only report. A resumed run picks up a degenerate stretch where
+the checkpoint left it (the quality rows are saved).
+"""
+
+from __future__ import annotations
+
+import logging
+
+from eslam.slam.observers import FrameDone, RunObserverBase, RunStart
+from eslam.slam.state import degenerate_row, degenerate_stretch, quality_row
+
+
+class FrameLogObserver(RunObserverBase):
+    """Warnings about frames on the run's logger (module doc)."""
+
+    def __init__(self, logger: logging.Logger) -> None:
+        self.log = logger
+        self._stretch = 0  # degenerate frames just before the next one
+
+    def on_start(self, start: RunStart) -> None:
+        self._stretch = degenerate_stretch(start.state.tracking_quality)
+
+    def on_frame(self, frame: FrameDone) -> None:
+        timestamp = float("nan") if frame.frame is None else frame.frame.timestamp
+        if not frame.has_depth:
+            self.log.warning(
+                "frame %d (timestamp %.6f) has no valid depth: skipped (pose predicted, "
+                "not tracked or mapped)",
+                frame.index,
+                timestamp,
+            )
+        if frame.emptied_by == "observed":
+            self.log.warning(
+                "frame %d: none of its pixels lies in space a keyframe observed "
+                "(tracking.observed_only): not tracked, the motion model's pose is kept",
+                frame.index,
+            )
+        elif frame.emptied_by is not None:
+            self.log.warning(
+                "frame %d: the view filter '%s' left no pixel: not tracked, the motion "
+                "model's pose is kept",
+                frame.index,
+                frame.emptied_by,
+            )
+        quality = frame.quality
+        if frame.failed:
+            assert quality is not None
+            self.log.warning(
+                "frame %d (timestamp %.6f): tracking failed (%.0f%% inliers, residual %.1f mm):"
+                " the motion model's pose is kept and the frame is no keyframe",
+                frame.index,
+                timestamp,
+                100.0 * quality.inlier_fraction,
+                1000.0 * quality.residual_m,
+            )
+        self._degeneracy(frame.index, frame)
+
+    def _degeneracy(self, index: int, frame: FrameDone) -> None:
+        """Log where a stretch of degenerate views begins and ends (not every frame)."""
+        degenerate = degenerate_row(quality_row(frame.quality))
+        quality = frame.quality
+        if degenerate and self._stretch == 0:
+            assert quality is not None
+            self.log.warning(
+                "frame %d: the view pins the pose down in only %d of 6 directions (smallest"
+                " normalised information %.4f): along the rest the pose follows the motion"
+                " model and may drift unseen (tracking_degenerate_frames in metrics.json)",
+                index,
+                6 - int(quality.degenerate_directions or 0),
+                quality.information,
+            )
+        elif not degenerate and self._stretch > 0:
+            self.log.info(
+                "frame %d: the view constrains the whole pose again (frames %d-%d were degenerate)",
+                index,
+                index - self._stretch,
+                index - 1,
+            )
+        self._stretch = self._stretch + 1 if degenerate else 0

@@ -1,0 +1,141 @@
+"""The tracking front end: one frame in, its pose and the tracker's judgement out.
+
+:class:`TrackingFrontEnd` prepares the frame's :class:`~eslam.slam.views.View`, takes
+the motion model's guess (:func:`~eslam.slam.trackers.predict_pose`), applies its view
+filters (:mod:`eslam.slam.view_filters`), runs the tracker (``tracking.method``, from
+:data:`~eslam.slam.trackers.TRACKERS`) and judges the result: a failed frame (the
+tracker said so, or its pose is not finite) keeps the guess. The run loop appends the
+answer, a :class:`TrackedFrame`, to the trajectory; observers report it.
+
+The front end keeps no state of its own between frames: whether the last frame failed
+(after which the motion model holds still) is read from the run's quality rows, which
+are checkpointed, so a run resumed right after a failed frame predicts its next frame
+exactly as the uninterrupted run does.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+from typing import Protocol
+
+import torch
+
+from eslam.slam.bounds_policy import first_pose
+from eslam.slam.context import RunContext
+from eslam.slam.state import SLAMState, failed_row
+from eslam.slam.trackers import Tracker, make_tracker, motion_guess
+from eslam.slam.tracking import TrackingQuality, TrackingResult
+from eslam.slam.view_filters import ViewFilter, make_filters
+from eslam.slam.views import View, make_view, restrict_view, upload_frame
+from eslam.types import Frame
+
+
+@dataclass(frozen=True, eq=False)
+class TrackedFrame:
+    """What the front end made of one frame.
+
+    Attributes:
+        pose: (4, 4) its camera-to-world pose on the device (the guess when it failed).
+        has_depth: whether the frame has any valid depth (none: not tracked, not mapped).
+        tracked: whether the tracker ran.
+        quality: the tracker's judgement (None when it has none or did not run).
+        emptied_by: the name of the view filter that left no pixel to track on (the
+            frame keeps the guess), else None.
+    """
+
+    pose: torch.Tensor
+    has_depth: bool
+    tracked: bool = False
+    quality: TrackingQuality | None = None
+    emptied_by: str | None = None
+
+    @property
+    def failed(self) -> bool:
+        """Whether the tracker judged the frame failed (it keeps the guess, is no keyframe)."""
+        return self.quality is not None and self.quality.failed
+
+
+class FrontEnd(Protocol):
+    """Estimates each frame's pose against the map in ``state`` (module doc)."""
+
+    def track(self, frame: Frame, index: int, state: SLAMState) -> TrackedFrame:
+        """Frame ``index`` (the next one of ``state``) tracked; ``state`` is not changed."""
+        ...
+
+
+class TrackingFrontEnd:
+    """The front end of the config (module doc).
+
+    Args:
+        context: the run.
+        tracker: the tracker (default: ``tracking.method``'s).
+        filters: the view filters (default: those the config turns on).
+    """
+
+    def __init__(
+        self,
+        context: RunContext,
+        tracker: Tracker | None = None,
+        filters: list[ViewFilter] | None = None,
+    ) -> None:
+        self.context = context
+        self.tracker = make_tracker(context.config) if tracker is None else tracker
+        self.filters = make_filters(context) if filters is None else list(filters)
+
+    @property
+    def log(self) -> logging.Logger:
+        return self.context.logger
+
+    def track(self, frame: Frame, index: int, state: SLAMState) -> TrackedFrame:
+        has_depth = bool(frame.valid_depth.any())
+        device = self.context.device
+        if index == 0:
+            return TrackedFrame(first_pose(frame, self.log).to(device), has_depth)
+        guess = self.guess(state)
+        if not has_depth or state.field is None or len(state.keyframes) == 0:
+            return TrackedFrame(guess, has_depth)
+        view = self.view(frame)
+        for view_filter in self.filters:
+            restricted = restrict_view(view, view_filter.keep(view, guess, state))
+            if restricted.sampleable_pixels() == 0 and view.sampleable_pixels() > 0:
+                return TrackedFrame(guess, has_depth, emptied_by=view_filter.name)
+            view = restricted
+        if view.sampleable_pixels() == 0:
+            return TrackedFrame(guess, has_depth)
+        result = self.tracker.track(state.field, view, guess, state.generator)
+        pose, quality = judged(result, guess)
+        return TrackedFrame(pose, has_depth, tracked=True, quality=quality)
+
+    def guess(self, state: SLAMState) -> torch.Tensor:
+        """The motion model's pose for the next frame of ``state``
+        (:func:`~eslam.slam.trackers.motion_guess`; whether the last frame failed is
+        read from its quality row)."""
+        rows = state.tracking_quality
+        after_failure = bool(rows) and failed_row(rows[-1])
+        constant_velocity = self.context.config.tracking.constant_velocity
+        return motion_guess(state.trajectory.poses, constant_velocity, after_failure)
+
+    def view(self, frame: Frame) -> View:
+        """``frame``'s images on the device as a tracker sees them (no filter applied)."""
+        rgb, depth = upload_frame(frame.rgb, frame.depth, self.context.device)
+        border = self.context.config.tracking.border
+        return make_view(rgb, depth, self.context.directions, border)
+
+
+def judged(
+    result: TrackingResult, guess: torch.Tensor
+) -> tuple[torch.Tensor, TrackingQuality | None]:
+    """A tracker's answer as the run takes it: (pose, quality). A non-finite pose is a
+    failure; a failed frame keeps ``guess`` (reads the device once)."""
+    quality = result.quality
+    if not bool(torch.isfinite(result.pose).all()):
+        quality = non_finite_quality(quality)
+    pose = guess if quality is not None and quality.failed else result.pose
+    return pose, quality
+
+
+def non_finite_quality(quality: TrackingQuality | None) -> TrackingQuality:
+    """The judgement of a frame whose tracker returned a non-finite pose: failed."""
+    iterations = 0 if quality is None else quality.iterations
+    return TrackingQuality(iterations, 0.0, float("inf"), failed=True)
