@@ -267,7 +267,9 @@ def normalised_information(system: Linearisation) -> tuple[torch.Tensor, torch.T
     return torch.linalg.eigh(information)
 
 
-def constrained_directions(system: Linearisation, threshold: float) -> tuple[torch.Tensor, int]:
+def constrained_directions(
+    system: Linearisation, threshold: float
+) -> tuple[torch.Tensor, torch.Tensor]:
     """Projector onto the pose directions the points constrain, and how many are not.
 
     Degeneracy test of Zhang, Kaess and Singh (ICRA 2016, "On degeneracy of
@@ -278,20 +280,22 @@ def constrained_directions(system: Linearisation, threshold: float) -> tuple[tor
     guess is kept along the others. Eigenvalues of :func:`normalised_information` below
     ``threshold`` are degenerate; the projector in the solver's tangent is A^-1 P_c A.
 
+    No host read: the projector is V diag(m) V^T with m_k = 1 for a kept eigenvector,
+    selected with ``torch.where``.
+
     Returns:
         (6, 6) float64 projector (the identity when nothing is degenerate or
-        ``threshold`` is 0) and the number of degenerate directions.
+        ``threshold`` is 0) and the number of degenerate directions (0-d int64 tensor).
     """
     identity = torch.eye(6, dtype=torch.float64, device=system.hessian.device)
     if threshold <= 0:
-        return identity, 0
+        return identity, torch.zeros((), dtype=torch.int64, device=identity.device)
     eigenvalues, eigenvectors = normalised_information(system)
-    kept = eigenvectors[:, eigenvalues >= threshold]
-    degenerate = 6 - kept.shape[1]
-    if degenerate == 0:
-        return identity, 0
+    kept = (eigenvalues >= threshold).double()
+    degenerate = 6 - kept.sum().long()
     to_centred, from_centred = centred_tangent(system.centre)
-    return from_centred @ (kept @ kept.T) @ to_centred, degenerate
+    projector = from_centred @ (eigenvectors * kept) @ eigenvectors.T @ to_centred
+    return torch.where(degenerate == 0, identity, projector), degenerate
 
 
 def information_figures(system: Linearisation, threshold: float) -> tuple[float, int | None]:
@@ -325,9 +329,9 @@ MAX_STEP = 0.5
 one frame's correction (a near-singular system), like a step that raises the cost."""
 
 
-def plausible(step: torch.Tensor) -> bool:
-    """Whether a (6,) step is finite and within :data:`MAX_STEP` (reads the device)."""
-    return bool(
+def plausible(step: torch.Tensor) -> torch.Tensor:
+    """0-d bool: whether a (6,) step is finite and within :data:`MAX_STEP`."""
+    return (
         torch.isfinite(step).all() & (step[:3].norm() <= MAX_STEP) & (step[3:].norm() <= MAX_STEP)
     )
 
@@ -366,19 +370,94 @@ def quality(system: Linearisation, config: SdfTrackerConfig) -> tuple[float, flo
     return fraction, rms
 
 
+@dataclass(frozen=True, eq=False)
+class Solver:
+    """The Levenberg-Marquardt iterate of one level, all on the device.
+
+    Attributes:
+        pose: (4, 4) the current pose.
+        system: the linearisation at ``pose``.
+        damping: 0-d float64 lambda.
+        running: 0-d bool, false once the level converged or had too few points.
+        iterations: 0-d int64 iterations taken (a step tried while running).
+    """
+
+    pose: torch.Tensor
+    system: Linearisation
+    damping: torch.Tensor
+    running: torch.Tensor
+    iterations: torch.Tensor
+
+
+def choose(flag: torch.Tensor, a: Linearisation, b: Linearisation) -> Linearisation:
+    """``a`` where the 0-d bool ``flag`` holds, else ``b``, field by field (no host read)."""
+    return Linearisation(
+        *(
+            torch.where(flag, getattr(a, name), getattr(b, name))
+            for name in ("residual", "weight", "cost", "hessian", "gradient", "valid", "centre")
+        )
+    )
+
+
+def lm_step(
+    field: SceneFieldLike,
+    points: torch.Tensor,
+    colours: torch.Tensor | None,
+    settings: SdfTrackerConfig,
+    solver: Solver,
+) -> Solver:
+    """One Levenberg-Marquardt iteration (module doc) with no host read: a step is
+    tried while the level runs and has at least :data:`MIN_POINTS` points in the band;
+    it is accepted (lambda halves) when it is plausible and does not raise the cost, else
+    rejected (lambda times 4); a small accepted step ends the level. A solver that no
+    longer runs comes back unchanged, so a fixed number of calls gives the result of
+    stopping at convergence."""
+    system, pose = solver.system, solver.pose
+    active = solver.running & (system.valid.sum() >= MIN_POINTS)
+    projector, _ = constrained_directions(system, settings.degeneracy)
+    step = projector @ damped_step(system, solver.damping)
+    tried = active & plausible(step)
+    safe = torch.where(tried, step, torch.zeros_like(step))
+    candidate = se3_exp(safe.to(pose.dtype)) @ pose
+    trial = linearise(field, points, candidate, settings, colours)
+    better = tried & (trial.cost <= system.cost)
+    small = (step[:3].norm() < settings.converged_translation) & (
+        step[3:].norm() < settings.converged_rotation
+    )
+    damping = torch.where(
+        better, solver.damping * 0.5, torch.where(active, solver.damping * 4.0, solver.damping)
+    )
+    return Solver(
+        pose=torch.where(better, candidate, pose),
+        system=choose(better, trial, system),
+        damping=damping,
+        running=active & ~(small & better),
+        iterations=solver.iterations + active.long(),
+    )
+
+
 def track_sdf(
     field: SceneFieldLike,
     view: View,
     initial_pose: torch.Tensor,
     config: SdfTrackerConfig,
     generator: torch.Generator,
+    poll: bool | None = None,
 ) -> TrackingResult:
-    """Pose of ``view`` by Levenberg-Marquardt on SDF residuals (module doc)."""
+    """Pose of ``view`` by Levenberg-Marquardt on SDF residuals (module doc).
+
+    Each level takes ``config.iterations`` calls of :func:`lm_step` (no host read). With
+    ``poll`` (default: on a CPU, where reading a value costs nothing) a level stops as
+    soon as it no longer runs: the same result, since the remaining calls would change
+    nothing. The quality and the information are read once, at the end.
+    """
     points_cam, pixels = sdf_points(view, max(config.levels), generator)
     colours = view.rgb[pixels] if config.colour_weight > 0 else None
     pose = initial_pose.detach().clone()
-    iterations = 0
+    iterations = torch.zeros((), dtype=torch.int64, device=pose.device)
     system = None
+    if poll is None:
+        poll = pose.device.type == "cpu"
     # colour_when: degenerate starts geometric and adds colour if the first linearisation
     # (at the guess, coarsest level) leaves a direction below the degeneracy threshold
     settings = config
@@ -392,30 +471,18 @@ def track_sdf(
             if information_figures(system, config.degeneracy)[1]:
                 settings = config
                 system = linearise(field, level_points, pose, settings, level_colours)
-        damping = torch.tensor(config.damping, dtype=torch.float64, device=pose.device)
+        solver = Solver(
+            pose=pose,
+            system=system,
+            damping=torch.tensor(config.damping, dtype=torch.float64, device=pose.device),
+            running=torch.ones((), dtype=torch.bool, device=pose.device),
+            iterations=iterations,
+        )
         for _ in range(config.iterations):
-            if int(system.valid.sum()) < MIN_POINTS:
-                break  # too few points see the surface to constrain 6 degrees of freedom
-            iterations += 1
-            projector, _ = constrained_directions(system, config.degeneracy)
-            step = projector @ damped_step(system, damping)
-            if not plausible(step):
-                damping = damping * 4.0
-                continue
-            candidate = se3_exp(step.to(pose.dtype)) @ pose
-            trial = linearise(field, level_points, candidate, settings, level_colours)
-            better = bool(trial.cost <= system.cost)
-            if better:
-                pose, system = candidate, trial
-                damping = damping * 0.5
-            else:
-                damping = damping * 4.0
-            small = bool(
-                (step[:3].norm() < config.converged_translation)
-                & (step[3:].norm() < config.converged_rotation)
-            )
-            if small and better:
+            solver = lm_step(field, level_points, level_colours, settings, solver)
+            if poll and not bool(solver.running):
                 break
+        pose, system, iterations = solver.pose, solver.system, solver.iterations
     assert system is not None
     inlier_fraction, residual = quality(system, config)
     information, degenerate = information_figures(system, config.degeneracy)
@@ -428,7 +495,7 @@ def track_sdf(
         pose=pose,
         loss=system.cost.detach(),
         quality=TrackingQuality(
-            iterations=iterations,
+            iterations=int(iterations),
             inlier_fraction=inlier_fraction,
             residual_m=residual,
             failed=failed,

@@ -1,16 +1,19 @@
 """No optimisation step reads the device on the host (tests/tripwire.py), on CPU in CI:
-the rendering tracker's step and the mapping step (the CUDA sync test checks them on
-a GPU: test_steps.py)."""
+the rendering tracker's step, the SDF tracker's Levenberg-Marquardt step and the
+mapping step (the CUDA sync test checks the first and last on a GPU: test_steps.py)."""
 
 from __future__ import annotations
+
+import dataclasses
 
 import pytest
 import torch
 
-from eslam.config import ESLAMConfig
+from eslam.config import ESLAMConfig, SdfTrackerConfig
 from eslam.field.scene_field import SceneField
 from eslam.render.rays import camera_directions
 from eslam.slam.mapping import MappingSettings, WindowPoses, mapping_optimiser, mapping_step
+from eslam.slam.sdf_tracking import Solver, linearise, lm_step, sdf_points, track_sdf
 from eslam.slam.tracking import (
     PoseVariables,
     TrackingSettings,
@@ -20,6 +23,8 @@ from eslam.slam.tracking import (
 )
 from eslam.slam.views import make_view
 from eslam.types import Intrinsics
+from tests.slam.test_sdf_tracking import CAMERA as SDF_CAMERA
+from tests.slam.test_sdf_tracking import TRUE_POSE, AnalyticField, perturbed, render_depth
 from tests.tripwire import HostRead, no_host_reads
 
 CAMERA = Intrinsics(width=40, height=30, fx=30.0, fy=30.0, cx=19.5, cy=14.5)
@@ -70,3 +75,56 @@ def test_the_mapping_step_reads_nothing_on_the_host() -> None:
     assert any(
         not torch.equal(a, b.detach()) for a, b in zip(before, field.parameters(), strict=True)
     )
+
+
+def _analytic_view():
+    """The SDF tracker tests' view of their analytic room, at its true pose."""
+    depth = render_depth(TRUE_POSE)
+    rgb = torch.full((SDF_CAMERA.height, SDF_CAMERA.width, 3), 0.5)
+    return make_view(rgb, depth, camera_directions(SDF_CAMERA), border=2)
+
+
+@pytest.mark.parametrize("colour", [0.0, 0.05])
+def test_the_sdf_tracking_step_reads_nothing_on_the_host(colour: float) -> None:
+    view = _analytic_view()
+    config = dataclasses.replace(SdfTrackerConfig(), degeneracy=0.01, colour_weight=colour)
+    field = AnalyticField()
+    points, pixels = sdf_points(view, 500, torch.Generator().manual_seed(0))
+    colours = view.rgb[pixels] if colour > 0 else None
+    start = perturbed(0.03, 3.0, seed=0)
+    system = linearise(field, points, start, config, colours)
+    solver = Solver(
+        start,
+        system,
+        torch.tensor(config.damping, dtype=torch.float64),
+        torch.ones((), dtype=torch.bool),
+        torch.zeros((), dtype=torch.int64),
+    )
+    with no_host_reads():
+        for _ in range(3):
+            solver = lm_step(field, points, colours, config, solver)
+    assert not torch.equal(solver.pose, start) and int(solver.iterations) == 3
+
+
+def test_sdf_tracking_reads_the_host_a_fixed_number_of_times_per_frame() -> None:
+    """Without polling (as on a GPU) the reads are per frame (quality, information),
+    not per iteration; polling (a CPU's default) stops early with the same pose."""
+    view = _analytic_view()
+    start = perturbed(0.03, 3.0, seed=1)
+    reads = {}
+    poses = {}
+    for iterations in (4, 12):
+        config = dataclasses.replace(SdfTrackerConfig(), iterations=iterations, degeneracy=0.01)
+        with no_host_reads(count_only=True) as seen:
+            result = track_sdf(
+                AnalyticField(), view, start, config, torch.Generator().manual_seed(0), poll=False
+            )
+        reads[iterations] = [read for read in seen if read.endswith("(eslam)")]
+        polled = track_sdf(
+            AnalyticField(), view, start, config, torch.Generator().manual_seed(0), poll=True
+        )
+        assert torch.equal(polled.pose, result.pose)
+        assert polled.quality == result.quality
+        poses[iterations] = result.pose
+    assert len(reads[4]) == len(reads[12]) > 0
+    assert not torch.equal(poses[12], start)
