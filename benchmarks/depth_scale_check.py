@@ -7,9 +7,10 @@ relative to the poses' translations, the residual would be smallest at s = s*. T
 source pixels are fixed at s = 1 (residual under ``--inlier-cm``, which drops
 occlusions and invalid depth), so every scale is scored on the same points.
 
-Used to tell the two causes of the 2.5 % scale component of the 7-Scenes redkitchen
-trajectory apart (docs/benchmarks.md): a depth/pose scale mismatch in the data, or
-tracking that lags the true motion. No SLAM runs here; it reads the sequence only.
+Used to tell the two causes of the scale component of the 7-Scenes redkitchen trajectory
+apart (docs/results.md, "Data checks (no SLAM)"): a depth/pose scale mismatch in the
+data, or tracking that lags the true motion. No SLAM runs here; it reads the sequence
+only.
 
     python benchmarks/depth_scale_check.py --config configs/sevenscenes/redkitchen.yaml \\
         --data ../shared/data/7scenes-redkitchen

@@ -99,7 +99,8 @@ FAST = [
 
 @pytest.mark.parametrize("name", FAST)
 def test_presets_track_with_hybrid_after_a_short_first_frame(name: str) -> None:
-    """docs/results.md: hybrid with a 60-step first frame tracked best on the demo,
+    """docs/results.md ("Replica room0, frames 0-19", "What we tried and ruled out"):
+    hybrid with a 60-step first frame tracked best on the demo,
     Replica room0 and 7-Scenes; the presets for users default to it. The CPU preset and
     folder.yaml start with the TSDF warm start (docs/tracking.md "The first frame")."""
     config = load_config(CONFIGS / name)
@@ -111,9 +112,8 @@ def test_presets_track_with_hybrid_after_a_short_first_frame(name: str) -> None:
 
 @pytest.mark.parametrize("name", FAST)
 def test_presets_hold_and_texture_degenerate_views(name: str) -> None:
-    """docs/results.md "Degenerate frames counted, and the texture on them": the test at
-    0.01 with the colour term on the frames it flags (corridor 4.36 -> 0.44-0.55 cm; other
-    scenes' trajectories unchanged)."""
+    """docs/results.md "Synthetic corridor (degenerate views)": the test at 0.01 with the
+    colour term on the frames it flags."""
     sdf = load_config(CONFIGS / name).tracking.sdf
     assert sdf.degeneracy == 0.01
     assert sdf.colour_weight == 0.2 and sdf.colour_when == "degenerate"

@@ -564,9 +564,9 @@ class ComputeConfig:
 
     compile: Literal["off", "tracking"] = "off"
     """tracking: the rendering tracker's loss (forward and backward) runs through
-    torch.compile (inductor), 1.42x faster than eager on the 2-core CPU, after a
-    compilation of about 100 s on the first tracked frame (benchmarks/bench_compile.py);
-    the field query and the mapping loss were slower compiled, so they stay eager.
+    torch.compile (inductor), after a compilation on the first tracked frame (speed and
+    compile time: docs/benchmarks.md "torch.compile"); the field query and the mapping
+    loss were slower compiled, so they stay eager.
     off: nothing is compiled."""
 
     def __post_init__(self) -> None:

@@ -66,8 +66,8 @@ except ImportError:  # the op is then undefined and using it raises (unavailable
 BLOCK_POINTS = 32
 """Points per program on a GPU: (32, C) corner tiles, with :data:`NUM_WARPS`. Not timed
 (no GPU was at hand): chosen by ptxas's register report for sm_90 and C = 32
-(benchmarks/triton_ptxas.py, docs/benchmarks.md), the largest block that spills in
-neither kernel nor dtype at 8 warps."""
+(benchmarks/triton_ptxas.py; docs/benchmarks.md, "Triton plane-sampling kernels"), the
+largest block that spills in neither kernel nor dtype at 8 warps."""
 
 NUM_WARPS = 8
 """Warps per program: at Triton's default 4 every kernel variant used 198-255

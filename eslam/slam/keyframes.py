@@ -404,10 +404,8 @@ class OverlapWindow:
 class RecentWindow:
     """A sliding window: the current keyframe and the latest others, ``size`` in all,
     no random draw (the local windows of keyframe odometry, e.g. DVO-SLAM's). The map is
-    refitted to recent views only: on 7-Scenes redkitchen the trajectory follows the
-    reference better from frame to frame (RPE 28 % lower) and drifts more over the
-    sequence (ATE 2.76 against 2.33 cm; docs/results.md, "The same probe with no ESLAM
-    map").
+    refitted to recent views only (how it compares with the random window on 7-Scenes:
+    docs/results.md, "What we tried and ruled out").
 
     Attributes:
         size: keyframes in the window, >= 3.

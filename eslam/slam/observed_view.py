@@ -6,9 +6,8 @@ field still answers, from feature planes shared along an axis and trained on oth
 surfaces: an extrapolation, not a measurement. A tracked frame's points can fall there
 (the strip of the image that has come into view since the last keyframe, surfaces an
 occluder hid); with the option on, such pixels are taken out of the frame's
-:class:`~eslam.slam.views.View` before tracking. (On 7-Scenes redkitchen, with a
-keyframe every 4th frame, that is about 0.5 % of a frame, and tracking was unchanged:
-docs/results.md, "Tracking on observed space only".)
+:class:`~eslam.slam.views.View` before tracking. (What it changed on real data:
+docs/results.md, "What we tried and ruled out".)
 
 Observed space is tested at the motion model's guess, on a grid of every ``stride``-th
 pixel in both directions; each pixel takes its grid point's answer. A grid point with

@@ -48,8 +48,8 @@ counts rho(lambda) per channel in the cost) and its Jacobian rows are
 
 stacked into the same normal equations: H = J^T W J + sum_k J^cT_k W^c_k J^c_k, and
 likewise the gradient. Cost: the field is queried with colour, and autograd runs four
-backward passes (SDF and three channels) instead of one (3-5x the time per frame on the
-demo; docs/results.md). With ``colour_when: degenerate`` a frame starts geometric and
+backward passes (SDF and three channels) instead of one (the cost: docs/benchmarks.md,
+"What we tried and ruled out"). With ``colour_when: degenerate`` a frame starts geometric and
 adds the colour term only if its first linearisation (at the guess, coarsest level)
 has a direction below ``degeneracy`` (:func:`constrained_directions`): the views whose
 geometry cannot pin the pose get the texture, the others the geometric tracker as is.

@@ -177,11 +177,9 @@ TrackingLoss = Callable[..., tuple[torch.Tensor, torch.Tensor]]
 def compiled_tracking_loss(backend: str = "inductor") -> TrackingLoss:
     """:func:`tracking_loss` through ``torch.compile`` (``compute.compile: tracking``).
 
-    On the 2-core CPU its forward + backward ran 1.42x faster than eager with the fused
-    plane sampling, after a compilation of about 100 s on the first frame
-    (benchmarks/bench_compile.py, docs/benchmarks.md); the loss traces without a graph
-    break. Shapes are static (``dynamic=False``): a new image size or plane growth
-    compiles again.
+    Its speed against eager and its compile time: benchmarks/bench_compile.py,
+    docs/benchmarks.md "torch.compile"; the loss traces without a graph break. Shapes
+    are static (``dynamic=False``): a new image size or plane growth compiles again.
     """
     return torch.compile(tracking_loss, backend=backend, dynamic=False)
 

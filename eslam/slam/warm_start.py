@@ -31,10 +31,10 @@ class WarmStart:
             rest lie in the free space 0 < z < D - T.
         lr_factor: multiplier of the map learning rates (planes, decoders).
 
-    The defaults were chosen on the demo scene (benchmarks/first_frame.py,
-    docs/benchmarks.md): more free-space points and a higher rate than the rendering
-    steps' 5x gave a lower held-out depth L1 (spurious zero crossings in front of the
-    surface are what a band-only fit leaves).
+    The defaults were chosen on the demo scene (benchmarks/first_frame.py;
+    docs/benchmarks.md, "Time to the first pose"): more free-space points and a higher
+    rate than the rendering steps' 5x gave a lower held-out depth L1 (spurious zero
+    crossings in front of the surface are what a band-only fit leaves).
     """
 
     steps: int

@@ -2,13 +2,14 @@
 
 The CPU preset (and the demo) map the first frame with a TSDF warm start (a regression
 onto the first depth image's projective TSDF, no rendering) and 30 rendering steps
-instead of the paper's 1000, so the first pose is tracked minutes sooner; its map is
-as good as the 1000-step one on held-out frames (benchmarks/first_frame.py,
-docs/benchmarks.md). Without the warm start a short first map is rougher (3.3x the
-held-out depth L1 at 60 steps), but the following mapping calls refine it: a run with
-a 60-step first frame tracks as well as one with a long first frame (500 steps here, to
-keep CI short; full runs with 1000 are in docs/results.md). Maps fitted too briefly
-must fail the held-out comparisons, so those comparisons can fail.
+instead of the paper's 1000, so the first pose is tracked minutes sooner; its map is as
+good as the 1000-step one on held-out frames (benchmarks/first_frame.py,
+docs/benchmarks.md "Time to the first pose"). Without the warm start a short first map
+is rougher (3.3x the held-out depth L1 at 60 steps), but the following mapping calls
+refine it: a run with a 60-step first frame tracks as well as one with a long first
+frame (500 steps here, to keep CI short; full runs: docs/results.md "Replica room0,
+frames 0-19"). Maps fitted too briefly must fail the held-out comparisons, so those
+comparisons can fail.
 """
 
 from __future__ import annotations
