@@ -7,9 +7,9 @@ turn, so a change of load hits both alike), the eager and the ``torch.compile``d
 
 * decoders: both MLP decoders on the plane features of 80,000 points;
 * field query: plane sampling + decoders at 80,000 points (:meth:`SceneField.query`);
-* tracking loss: :func:`eslam.slam.tracking.tracking_loss`, 2000 rays (the iteration
+* tracking loss: :func:`eslam.slam.tracking.render.tracking_loss`, 2000 rays (the iteration
   without its ray draw and Adam step, which stay outside any compiled graph);
-* mapping loss: :func:`eslam.slam.mapping.mapping_loss`, 4000 rays over 10 views.
+* mapping loss: :func:`eslam.slam.mapping.mapper.mapping_loss`, 4000 rays over 10 views.
 
 It reuses bench_core's workload (Replica-sized synthetic views, room0's bound, the
 default plane sampling) and prints the first compiled call's time (the compilation) as
@@ -38,8 +38,8 @@ from bench_core import SEED, Stats, build_field, synchronize, time_interleaved, 
 
 from eslam.field.planes import normalize_points
 from eslam.field.scene_field import SceneField
-from eslam.slam.mapping import MappingSettings, WindowPoses, mapping_loss
-from eslam.slam.tracking import PoseVariables, TrackingSettings, tracking_loss
+from eslam.slam.mapping.mapper import MappingSettings, WindowPoses, mapping_loss
+from eslam.slam.tracking.render import PoseVariables, TrackingSettings, tracking_loss
 from eslam.slam.views import draw_rays
 
 Step = Callable[[], None]

@@ -25,7 +25,7 @@ with the paper's FieldConfig, RenderConfig, LossConfig, TrackingConfig and
 MappingConfig defaults; the images are synthetic, Replica-sized (1200 x 680, fx = fy =
 600) with seeded random depths in [0.5, 4] m and random colours, seen from seeded random
 poses inside the bound. The iterations are the run's own step functions,
-:func:`eslam.slam.tracking.tracking_step` and :func:`eslam.slam.mapping.mapping_step`
+:func:`eslam.slam.tracking.render.tracking_step` and :func:`eslam.slam.mapping.mapper.mapping_step`
 (no copies), with the optimisers the run builds.
 
 The markdown tables are printed and, unless ``--no-append``, appended to
@@ -62,9 +62,9 @@ from eslam.field.scene_field import SceneField
 from eslam.field.triton_sampling import check_device as check_sampling_device
 from eslam.geometry.pose import quaternion_to_matrix
 from eslam.render.rays import camera_directions
-from eslam.slam.keyframes import KeyframeStore, make_window_strategy
-from eslam.slam.mapping import MappingSettings, WindowPoses, mapping_optimiser, mapping_step
-from eslam.slam.tracking import (
+from eslam.slam.mapping.keyframes import KeyframeStore, make_window_strategy
+from eslam.slam.mapping.mapper import MappingSettings, WindowPoses, mapping_optimiser, mapping_step
+from eslam.slam.tracking.render import (
     PoseVariables,
     TrackingSettings,
     frozen,
@@ -170,7 +170,7 @@ def tracking_iteration(
     config: ESLAMConfig,
     generator: torch.Generator,
 ) -> Callable[[], object]:
-    """One iteration of the rendering tracker: :func:`eslam.slam.tracking.tracking_step`
+    """One iteration of the rendering tracker: :func:`eslam.slam.tracking.render.tracking_step`
     (call it with the field frozen)."""
     settings = TrackingSettings(config.tracking.render, config.render, config.loss)
     variables = PoseVariables.from_pose(pose)
@@ -189,7 +189,7 @@ def mapping_iteration(
     config: ESLAMConfig,
     generator: torch.Generator,
 ) -> Callable[[], object]:
-    """One iteration of :func:`eslam.slam.mapping.mapping_step`: planes, decoders and all
+    """One iteration of :func:`eslam.slam.mapping.mapper.mapping_step`: planes, decoders and all
     poses but the oldest."""
     settings = MappingSettings(config.mapping, config.render, config.loss)
     window = WindowPoses.create(poses, [k > 0 for k in range(len(views))])

@@ -47,7 +47,7 @@ from _machine import (
 )
 
 from eslam.config import load_config
-from eslam.slam.observers import FrameDone, RunObserverBase, RunStart
+from eslam.slam.run.observers import FrameDone, RunObserverBase, RunStart
 from eslam.slam.session import RunResult, run_slam
 
 CONFIG = REPO / "eslam" / "configs" / "replica" / "room0.yaml"

@@ -5,9 +5,10 @@ The workload is bench_core's (synthetic Replica-sized views, the paper's field o
 room0's bound, the paper's settings): a tracking frame of ``tracking.render.iterations``
 iterations and a mapping call of ``mapping.iterations`` iterations over a window of
 bench_core's 10 keyframes (all poses but the oldest refined), run by the eager path
-(:func:`eslam.slam.tracking.track_frame`, :func:`eslam.slam.mapping.map_window`) and by
-``compute.cuda_graphs: auto`` (:class:`eslam.slam.graphed.GraphedRenderTracker`,
-:class:`eslam.slam.graphed.WindowMapper`), each on its own copy of the field and its
+(:func:`eslam.slam.tracking.render.track_frame`,
+:func:`eslam.slam.mapping.mapper.map_window`) and by ``compute.cuda_graphs: auto``
+(:class:`eslam.slam.cuda_graphs.GraphedRenderTracker`,
+:class:`eslam.slam.cuda_graphs.WindowMapper`), each on its own copy of the field and its
 own generator seeded alike.
 
 1. Agreement: one frame and one call of each from the same state; the largest
@@ -43,9 +44,9 @@ from _machine import (
 )
 from bench_core import SEED, WINDOW, Stats, build_field, synchronize, time_interleaved, workload
 
-from eslam.slam.graphed import GraphedRenderTracker, WindowMapper, use_cuda_graphs
-from eslam.slam.mapping import MappingSettings, map_window, mapping_schedule
-from eslam.slam.tracking import TrackingSettings, track_frame
+from eslam.slam.cuda_graphs import GraphedRenderTracker, WindowMapper, use_cuda_graphs
+from eslam.slam.mapping.mapper import MappingSettings, map_window, mapping_schedule
+from eslam.slam.tracking.render import TrackingSettings, track_frame
 
 
 def timed(call: Callable[[], object], device: torch.device) -> tuple[object, float]:

@@ -2,9 +2,9 @@
 
 For each schedule (iterations, learning-rate factor, rays per step, cosine decay of the
 learning rates to a final fraction, and optionally a TSDF warm start before them,
-:mod:`eslam.slam.warm_start`) a fresh field (seeded) is fit to frame 0 of the
+:mod:`eslam.slam.mapping.warm_start`) a fresh field (seeded) is fit to frame 0 of the
 demo's synthetic room with its ground-truth pose, exactly as the run loop's first
-mapping call does (:func:`eslam.slam.mapping.map_window`). The quality figures
+mapping call does (:func:`eslam.slam.mapping.mapper.map_window`). The quality figures
 (:func:`eslam.render.held_out.held_out_errors`) are taken over every ``--pixel-step``-th
 valid pixel of frames ``--held-out`` (never mapped) whose surface point frame 0 observed
 (``--all-pixels`` scores them all): the held-out depth L1 (mean |surface depth - true
@@ -48,10 +48,10 @@ from _machine import (
 from eslam.config import load_config
 from eslam.render.held_out import HeldOutErrors, held_out_errors
 from eslam.render.rays import camera_directions
-from eslam.slam.mapping import MappingSchedule, MappingSettings, map_window
+from eslam.slam.mapping.mapper import MappingSchedule, MappingSettings, map_window
+from eslam.slam.mapping.warm_start import WarmStart
 from eslam.slam.state import new_field
 from eslam.slam.views import make_view
-from eslam.slam.warm_start import WarmStart
 from eslam.synthetic import SynthConfig, build_scene, generate_sequence, scene_bound
 from eslam.workflows.demo import DEMO_SCENE
 

@@ -5,14 +5,15 @@ the same depth images, so its ATE figures measure how closely a tracker reproduc
 that system's trajectory. This runs the same method class with none of ESLAM: every
 frame's depth is fused into a voxel TSDF at its tracked pose (Curless and Levoy 1996:
 the running average of the projective TSDF,
-:func:`eslam.slam.warm_start.projective_tsdf`), and each new frame is tracked against
+:func:`eslam.slam.mapping.warm_start.projective_tsdf`), and each new frame is tracked against
 that volume from the constant-velocity guess by eslam's SDF tracker (the config's
 ``tracking.sdf`` settings and border: the Levenberg-Marquardt the ``sdf`` and ``hybrid``
 trackers run on the neural map; point-to-implicit residuals where KinectFusion uses
 projective point-to-plane ICP against a raycast of the same volume). No neural field,
 no mapping, no rendering. A frame the tracker reports as failed keeps the guess and is
 not fused, as the run loop does with keyframes; the motion model and that rule are the
-front end's own (:func:`~eslam.slam.trackers.motion_guess`, :func:`~eslam.slam.frontend.judged`).
+front end's own (:func:`~eslam.slam.tracking.trackers.motion_guess`,
+:func:`~eslam.slam.tracking.frontend.judged`).
 
 It writes ``trajectory.txt`` into ``--out`` (readable by ``eslam ate`` and
 ``benchmarks/trajectory_consistency.py``) and appends ATE RMSE, Sim(3) ATE and scale,
@@ -71,11 +72,11 @@ from eslam.evaluate.trajectory import absolute_trajectory_error
 from eslam.geometry.camera import pixels_to_camera_directions, project_points
 from eslam.io.trajectory import write_tum_trajectory
 from eslam.render.rays import camera_directions
-from eslam.slam.frontend import judged
-from eslam.slam.sdf_tracking import track_sdf
-from eslam.slam.trackers import motion_guess
+from eslam.slam.mapping.warm_start import projective_tsdf
+from eslam.slam.tracking.frontend import judged
+from eslam.slam.tracking.sdf import track_sdf
+from eslam.slam.tracking.trackers import motion_guess
 from eslam.slam.views import View, make_view
-from eslam.slam.warm_start import projective_tsdf
 from eslam.types import FieldOutput, Intrinsics
 
 UNSEEN = 1.0

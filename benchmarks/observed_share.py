@@ -2,7 +2,7 @@
 
 ``tracking.observed_only`` (docs/tracking.md) tracks a frame only on the pixels whose
 depth point, at the motion model's guess, lies in space some keyframe observed
-(:func:`eslam.slam.observed_view.observed_pixels`). This script measures the share of
+(:func:`eslam.slam.tracking.observed_view.observed_pixels`). This script measures the share of
 a frame's trackable pixels (valid depth, outside ``tracking.border``) that test passes,
 at the reference poses, with every ``mapping.every``-th earlier frame as a keyframe
 (the run loop's keyframes when no frame fails): the most the option can change. No
@@ -29,7 +29,7 @@ from eslam.config import load_config
 from eslam.data import open_sequence
 from eslam.mesh.observed import ObservedViews
 from eslam.render.rays import camera_directions
-from eslam.slam.observed_view import observed_pixels
+from eslam.slam.tracking.observed_view import observed_pixels
 from eslam.slam.views import make_view, sampleable_mask
 
 

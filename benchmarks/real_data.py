@@ -64,7 +64,7 @@ from eslam.config import load_config
 from eslam.evaluate.trajectory import absolute_trajectory_error
 from eslam.io.checkpoint import load_checkpoint
 from eslam.slam.session import RunResult, run_slam
-from eslam.slam.trackers import TRACKERS
+from eslam.slam.tracking.trackers import TRACKERS
 
 CONFIGS = REPO / "eslam" / "configs"
 

@@ -63,14 +63,14 @@ from eslam.config.device import resolve_device
 from eslam.data import open_sequence
 from eslam.geometry import rotation_angle
 from eslam.io.trajectory import write_tum_trajectory
-from eslam.slam.backend import make_back_end
 from eslam.slam.context import RunContext
-from eslam.slam.frontend import TrackingFrontEnd
 from eslam.slam.loop import RunLoop
-from eslam.slam.observers import Observers
+from eslam.slam.mapping.backend import make_back_end
+from eslam.slam.run.observers import Observers
 from eslam.slam.state import SLAMState, initial_state
-from eslam.slam.trackers import Tracker, make_tracker
-from eslam.slam.tracking import TrackingResult
+from eslam.slam.tracking.base import Tracker, TrackingResult
+from eslam.slam.tracking.frontend import TrackingFrontEnd
+from eslam.slam.tracking.trackers import make_tracker
 from eslam.slam.views import View
 
 HOP = 10

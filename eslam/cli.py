@@ -258,7 +258,7 @@ def _positive_float(text: str) -> float:
 
 
 def _command_mesh(args: argparse.Namespace) -> int:
-    from eslam.slam.remesh import remesh_run
+    from eslam.slam.run.remesh import remesh_run
 
     result = remesh_run(args.run_dir, resolution=args.resolution, device=args.device)
     print(

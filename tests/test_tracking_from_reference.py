@@ -10,7 +10,7 @@ import pytest
 import torch
 
 from eslam.io.trajectory import read_trajectory
-from eslam.slam.tracking import TrackingResult
+from eslam.slam.tracking.base import TrackingResult
 from eslam.synthetic import SynthConfig, generate_sequence
 from eslam.testing import write_sevenscenes_sequence
 from eslam.testing.scripts import load_script

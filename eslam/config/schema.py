@@ -435,7 +435,7 @@ class MappingConfig:
     """Joint optimisation of map and keyframe poses (docs/method.md section 5; Replica values)."""
 
     back_end: Literal["keyframes"] = "keyframes"
-    """Mapping back end (eslam/slam/backend.py): keyframes = the paper's (a keyframe every
+    """Mapping back end (eslam/slam/mapping/backend.py): keyframes = the paper's (a keyframe every
     ``every`` frames, mapped with a window of earlier ones)."""
     every: int = 4
     """Map every k-th frame (plus the last); every mapped frame becomes a keyframe."""
@@ -460,7 +460,7 @@ class MappingConfig:
     first_warm_start: Literal["none", "tsdf"] = "none"
     """Before the first frame's rendering steps: none (release) or tsdf, a regression of
     the geometry planes and SDF decoder onto the first depth image's projective TSDF
-    (eslam/slam/warm_start.py; with it 30 rendering steps match 1000 without)."""
+    (eslam/slam/mapping/warm_start.py; with it 30 rendering steps match 1000 without)."""
     first_warm_start_steps: int = 400
     """Adam steps of the tsdf warm start."""
     first_warm_start_points: int = 4000
@@ -557,7 +557,7 @@ class ComputeConfig:
     cuda_graphs: Literal["auto", "off"] = "off"
     """auto: on a CUDA device whose torch can capture them (CUDAGraph with
     register_generator_state, capturable Adam), each tracking and mapping iteration is
-    one CUDA-graph replay (eslam.slam.graphed), captured again when the planes grow (a
+    one CUDA-graph replay (eslam.slam.cuda_graphs), captured again when the planes grow (a
     graph per window size); otherwise, and always on CPU or MPS, the eager steps run.
     off: the eager steps everywhere. Results equal the eager path within float
     tolerance; the default stays off until the graphed path has been checked on a GPU."""

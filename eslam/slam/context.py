@@ -14,7 +14,7 @@ import torch
 
 from eslam.config import ESLAMConfig
 from eslam.render.rays import camera_directions
-from eslam.slam.observers import RunObserver
+from eslam.slam.run.observers import RunObserver
 from eslam.types import Intrinsics
 
 

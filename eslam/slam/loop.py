@@ -1,10 +1,10 @@
 """The run loop: a sequencer of frames through a front end and a back end (ARCHITECTURE.md).
 
 For each frame, :class:`RunLoop` asks the tracking front end
-(:mod:`eslam.slam.frontend`) for its pose, appends it to the trajectory, and hands the
-frame to the mapping back end (:mod:`eslam.slam.backend`), which maps it if it is a
+(:mod:`eslam.slam.tracking.frontend`) for its pose, appends it to the trajectory, and hands the
+frame to the mapping back end (:mod:`eslam.slam.mapping.backend`), which maps it if it is a
 keyframe; when the stream ends, the back end maps what is left. Everything the world
-sees goes through observers (:mod:`eslam.slam.observers`). Wiring a run (config, input,
+sees goes through observers (:mod:`eslam.slam.run.observers`). Wiring a run (config, input,
 run folder, components) is :mod:`eslam.slam.session`'s.
 
 A frame that fails half way (unreadable file, out of memory, Ctrl-C) is rolled back,
@@ -17,11 +17,11 @@ import time
 from collections.abc import Iterable, Iterator
 
 from eslam.data.prefetch import close_iterator
-from eslam.slam.backend import BackEnd
-from eslam.slam.frontend import FrontEnd
-from eslam.slam.observers import FrameDone, RunEnd, RunObserver
-from eslam.slam.resources import device_clock
+from eslam.slam.mapping.backend import BackEnd
+from eslam.slam.run.observers import FrameDone, RunEnd, RunObserver
+from eslam.slam.run.resources import device_clock
 from eslam.slam.state import FrameMark, SLAMState, quality_row
+from eslam.slam.tracking.frontend import FrontEnd
 from eslam.types import Frame
 
 __all__ = ["RunLoop"]

@@ -9,7 +9,7 @@ end, built from the config through their registries unless passed in), and hands
 frames to :class:`~eslam.slam.loop.RunLoop`.
 
 A run that stops (an error, Ctrl-C, SIGTERM via the CLI) keeps its completed frames
-and says how to resume (:mod:`eslam.slam.stops`).
+and says how to resume (:mod:`eslam.slam.run.stops`).
 """
 
 from __future__ import annotations
@@ -34,24 +34,24 @@ from eslam.data.selection import sequence_timestamps
 from eslam.data.source import FrameSource, SequenceSource, source_length
 from eslam.errors import ConfigError, ESLAMError, InputError, RunInterrupted
 from eslam.field.triton_sampling import check_device
-from eslam.slam.backend import BackEnd, make_back_end
 from eslam.slam.context import RunContext
-from eslam.slam.frame_log import FrameLogObserver
-from eslam.slam.frontend import FrontEnd, TrackingFrontEnd
 from eslam.slam.loop import RunLoop
-from eslam.slam.observers import LogObserver, Observers, RunObserver, RunStart
-from eslam.slam.progress import ProgressObserver
-from eslam.slam.resources import PeakMemory
-from eslam.slam.run_folder import (
+from eslam.slam.mapping.backend import BackEnd, make_back_end
+from eslam.slam.run.folder import (
     absolute_data_path,
     check_saved_frames,
     log_lock_takeover,
     open_run_folder,
 )
-from eslam.slam.run_writer import RunWriter
+from eslam.slam.run.frame_log import FrameLogObserver
+from eslam.slam.run.observers import LogObserver, Observers, RunObserver, RunStart
+from eslam.slam.run.progress import ProgressObserver
+from eslam.slam.run.resources import PeakMemory
+from eslam.slam.run.stops import interrupted_early, save_on_failure, stopped_error
+from eslam.slam.run.stream_report import StreamLog
+from eslam.slam.run.writer import RunWriter
 from eslam.slam.state import initial_state, load_state
-from eslam.slam.stops import interrupted_early, save_on_failure, stopped_error
-from eslam.slam.stream_report import StreamLog
+from eslam.slam.tracking.frontend import FrontEnd, TrackingFrontEnd
 
 log = logging.getLogger("eslam")
 
@@ -77,8 +77,8 @@ class RunResult:
 class Components:
     """Builders of a run's components, for callers that bring their own (tests,
     benchmarks, code outside eslam); each takes the run's :class:`RunContext`. None:
-    the config's (:class:`~eslam.slam.frontend.TrackingFrontEnd`,
-    :func:`~eslam.slam.backend.make_back_end`)."""
+    the config's (:class:`~eslam.slam.tracking.frontend.TrackingFrontEnd`,
+    :func:`~eslam.slam.mapping.backend.make_back_end`)."""
 
     front_end: Callable[[RunContext], FrontEnd] | None = None
     back_end: Callable[[RunContext], BackEnd] | None = None
@@ -209,7 +209,7 @@ def run_slam(
     anything is written (the sequence opens, its first and last frames read and pass
     the reader's checks), so bad input leaves an earlier run in ``run_dir`` untouched.
     The run holds the folder's lock while it writes, and stores ``data.path`` absolute
-    and the input's fingerprint (:mod:`eslam.slam.run_folder`).
+    and the input's fingerprint (:mod:`eslam.slam.run.folder`).
 
     Args:
         config: the fully resolved configuration (saved as config.yaml).

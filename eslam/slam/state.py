@@ -26,8 +26,8 @@ from eslam.field.scene_field import SceneField
 from eslam.field.triton_sampling import check_device
 from eslam.io.checkpoint import load_checkpoint, save_checkpoint
 from eslam.mesh.observed import ObservedViews
-from eslam.slam.keyframes import KeyframeStore, WindowStrategy, make_window_strategy
-from eslam.slam.tracking import TrackingQuality
+from eslam.slam.mapping.keyframes import KeyframeStore, WindowStrategy, make_window_strategy
+from eslam.slam.tracking.base import TrackingQuality
 from eslam.slam.trajectory import Trajectory
 from eslam.types import Intrinsics
 
@@ -135,7 +135,7 @@ TRACKING_COLUMNS = (
     "tracking_degenerate_directions",
 )
 """The columns of :attr:`SLAMState.tracking_quality` (the fields of
-:class:`~eslam.slam.tracking.TrackingQuality`; failed as 1/0), also the names of
+:class:`~eslam.slam.tracking.base.TrackingQuality`; failed as 1/0), also the names of
 timings.json's per-frame lists."""
 
 

@@ -3,7 +3,7 @@
 A CUDA graph replays its kernels on the addresses it was captured with, so an
 iteration that is to be captured may only read and write tensors that outlive it and
 are refilled in place. This module runs the eager steps
-(:func:`~eslam.slam.tracking.tracking_step`, :func:`~eslam.slam.mapping.mapping_step`)
+(:func:`~eslam.slam.tracking.render.tracking_step`, :func:`~eslam.slam.mapping.mapper.mapping_step`)
 on such tensors:
 
 - static views: a frame's (or a window's) images copied into buffers of the camera's
@@ -16,7 +16,7 @@ on such tensors:
 - one Adam for the tracker and one for mapping, whose learning rates are 0-d tensors
   (filled between iterations; capturable on CUDA), reset in place (moments and step
   counts zeroed, :func:`reset_adam`) instead of a new optimiser per frame or call;
-- the tracker's best loss and pose kept in place (:func:`~eslam.slam.tracking.keep_best`).
+- the tracker's best loss and pose kept in place (:func:`~eslam.slam.tracking.render.keep_best`).
 
 The random draws stay inside the step (same generator, same order, same shapes as the
 eager step), so the numbers drawn are the eager path's. That is why the rays are not
@@ -26,7 +26,7 @@ graph is captured per window size; the buffers, the pose variables and the optim
 are shared by all of them.
 
 Run eagerly (any device) the iterations equal the eager ones within float tolerance
-(tests/slam/test_static_steps.py); :mod:`eslam.slam.graphed` captures one of them as a
+(tests/slam/test_static_steps.py); :mod:`eslam.slam.cuda_graphs` captures one of them as a
 CUDA graph and replays it.
 """
 
@@ -40,7 +40,7 @@ import torch
 from eslam.field.scene_field import SceneField
 from eslam.geometry.pose import pose_from_quaternion_translation, quaternion_translation_from_pose
 from eslam.render.renderer import SceneFieldLike
-from eslam.slam.mapping import (
+from eslam.slam.mapping.mapper import (
     MappingResult,
     MappingSchedule,
     MappingSettings,
@@ -48,9 +48,9 @@ from eslam.slam.mapping import (
     mapping_optimiser,
     mapping_step,
 )
-from eslam.slam.tracking import (
+from eslam.slam.tracking.base import TrackingResult
+from eslam.slam.tracking.render import (
     PoseVariables,
-    TrackingResult,
     TrackingSettings,
     frozen,
     keep_best,
@@ -176,9 +176,10 @@ class StaticTracking:
         self.best_pose.copy_(initial_pose.detach())
 
     def step(self, field: SceneFieldLike, generator: torch.Generator) -> None:
-        """One iteration (:func:`~eslam.slam.tracking.tracking_step`), the best kept in place.
+        """One iteration (:func:`~eslam.slam.tracking.render.tracking_step`), the best kept
+        in place.
 
-        Call it with the field frozen (:class:`~eslam.slam.tracking.frozen`).
+        Call it with the field frozen (:class:`~eslam.slam.tracking.render.frozen`).
         """
         loss, pose = tracking_step(
             field, self.view, self.variables, self.optimiser, self.settings, generator
@@ -304,7 +305,7 @@ class StaticMapping:
         set_learning_rates(self.optimiser, [start * scale for start in starts])
 
     def step(self, field: SceneField, generator: torch.Generator, rays: int, size: int) -> None:
-        """One iteration (:func:`~eslam.slam.mapping.mapping_step`) over the first ``size``
+        """One iteration (:func:`~eslam.slam.mapping.mapper.mapping_step`) over the first ``size``
         slots, its loss kept in place."""
         loss = mapping_step(
             field,
@@ -332,7 +333,7 @@ def run_tracking(
     initial_pose: torch.Tensor,
     iterate: Callable[[], None],
 ) -> TrackingResult:
-    """Track a frame on ``tracking``'s buffers, as :func:`~eslam.slam.tracking.track_frame`.
+    """Track a frame on ``tracking``'s buffers, as :func:`~eslam.slam.tracking.render.track_frame`.
 
     ``iterate`` runs one iteration (``tracking.step`` on the run's generator, or a graph
     replay of it); the field is frozen meanwhile.
@@ -353,7 +354,7 @@ def run_mapping(
     iterate: Callable[[], None],
     on_step: Callable[[int], None] | None = None,
 ) -> MappingResult:
-    """A mapping call on ``mapping``'s buffers, as :func:`~eslam.slam.mapping.map_window`.
+    """A mapping call on ``mapping``'s buffers, as :func:`~eslam.slam.mapping.mapper.map_window`.
 
     ``iterate`` runs one iteration (``mapping.step`` on the run's generator, or a graph
     replay of it); the map learning rates follow ``schedule`` between iterations.

@@ -1,4 +1,4 @@
-"""The rerun viewer: a :class:`~eslam.slam.viewer.ViewerSink` that logs to rerun (docs/live.md).
+"""The rerun viewer: a :class:`~eslam.slam.run.viewer.ViewerSink` that logs to rerun (docs/live.md).
 
 rerun-sdk (the ``[viewer]`` extra, pinned to 0.41: its API changes every minor release)
 is imported only when a viewer is asked for. One recording stream per run, with any of

@@ -36,7 +36,7 @@ from eslam.io.mesh_files import read_mesh, read_mesh_ply, write_mesh_ply
 from eslam.io.run_dir import RunDirectory, write_json
 from eslam.io.trajectory import read_trajectory
 from eslam.mesh.cull import CullCameras, CullOptions, cull_mesh
-from eslam.slam.run_folder import check_same_input
+from eslam.slam.run.folder import check_same_input
 from eslam.types import TriangleMesh
 from eslam.viz.plots import plot_trajectories, plot_translation_error
 from eslam.workflows.progress import StageProgress

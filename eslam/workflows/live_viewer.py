@@ -11,7 +11,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 from eslam.config import ESLAMConfig
-from eslam.slam.viewer import ViewerObserver
+from eslam.slam.run.viewer import ViewerObserver
 from eslam.viz.rerun_viewer import ViewerOutputs, open_rerun_sink
 
 VIEWER_MODES = ("rerun", "rerun-web")

@@ -41,7 +41,7 @@ from eslam.config import ESLAMConfig, load_config
 from eslam.config.packaged import find_config
 from eslam.errors import ConfigError, ESLAMError, InputError
 from eslam.io.run_dir import RunDirectory, json_text, write_json
-from eslam.slam.run_folder import absolute_data_path
+from eslam.slam.run.folder import absolute_data_path
 from eslam.slam.session import run_slam
 from eslam.synthetic import read_synthetic_bound
 from eslam.workflows.evaluate_run import EvaluationOptions, evaluate_run

@@ -16,7 +16,7 @@ from eslam.data import open_sequence
 from eslam.errors import InputError
 from eslam.geometry.bounds import depth_points, fraction_outside
 from eslam.io.checkpoint import load_checkpoint
-from eslam.slam.bounds_policy import bound_from_frame, check_depth_found, check_some_depth
+from eslam.slam.mapping.bounds_policy import bound_from_frame, check_depth_found, check_some_depth
 from eslam.slam.session import run_slam
 from eslam.synthetic import read_synthetic_bound
 from eslam.workflows.demo import DEMO_CONFIG

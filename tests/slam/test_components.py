@@ -15,12 +15,12 @@ from eslam.config import MappingConfig, TrackingConfig
 from eslam.errors import ConfigError
 from eslam.io.checkpoint import load_checkpoint
 from eslam.registry import Registry
-from eslam.slam.backend import BACK_ENDS, KeyframeBackEnd
-from eslam.slam.frontend import TrackingFrontEnd
-from eslam.slam.keyframes import WINDOWS
+from eslam.slam.mapping.backend import BACK_ENDS, KeyframeBackEnd
+from eslam.slam.mapping.keyframes import WINDOWS
 from eslam.slam.session import Components, run_slam
-from eslam.slam.trackers import TRACKERS
-from eslam.slam.view_filters import VIEW_FILTERS
+from eslam.slam.tracking.frontend import TrackingFrontEnd
+from eslam.slam.tracking.trackers import TRACKERS
+from eslam.slam.tracking.view_filters import VIEW_FILTERS
 from eslam.slam.views import sampleable_mask
 from tests.conftest import TINY_FRAMES, tiny_config
 

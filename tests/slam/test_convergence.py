@@ -27,9 +27,9 @@ from eslam.losses import compute_losses
 from eslam.render.rays import camera_directions, rays_from_pixels
 from eslam.render.renderer import render_rays, render_rays_without_depth
 from eslam.render.sampling import ray_box_intersection
-from eslam.slam.mapping import MappingSchedule, MappingSettings, map_window
-from eslam.slam.trackers import make_tracker
-from eslam.slam.tracking import TrackingSettings, track_frame
+from eslam.slam.mapping.mapper import MappingSchedule, MappingSettings, map_window
+from eslam.slam.tracking.render import TrackingSettings, track_frame
+from eslam.slam.tracking.trackers import make_tracker
 from eslam.slam.views import View, make_view, sample_view_rays
 from eslam.synthetic import SynthConfig, build_scene, generate_sequence, scene_bound
 from eslam.types import Frame, RayBatch

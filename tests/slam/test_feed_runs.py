@@ -18,13 +18,13 @@ from eslam.data.source import IterableSource
 from eslam.errors import ConfigError, InputError
 from eslam.io.trajectory import read_tum_trajectory
 from eslam.render.rays import camera_directions
-from eslam.slam.keyframe_views import KeyframeViews, view_bytes
-from eslam.slam.keyframes import KeyframeStore
-from eslam.slam.observers import FrameDone, MappingStep, RunObserverBase
-from eslam.slam.progress import ProgressObserver
-from eslam.slam.run_writer import WallTime, speed_metrics
+from eslam.slam.mapping.keyframe_views import KeyframeViews, view_bytes
+from eslam.slam.mapping.keyframes import KeyframeStore
+from eslam.slam.run.observers import FrameDone, MappingStep, RunObserverBase
+from eslam.slam.run.progress import ProgressObserver
+from eslam.slam.run.stops import stopped_error
+from eslam.slam.run.writer import WallTime, speed_metrics
 from eslam.slam.session import run_slam
-from eslam.slam.stops import stopped_error
 from eslam.slam.trajectory import Trajectory
 from eslam.slam.views import make_view
 from eslam.workflows.evaluate_run import sequence_frames

@@ -22,11 +22,11 @@ import torch
 from eslam.config import ESLAMConfig, load_config
 from eslam.render.held_out import HeldOutErrors, held_out_errors
 from eslam.render.rays import camera_directions
-from eslam.slam.mapping import MappingSchedule, MappingSettings, map_window, mapping_schedule
+from eslam.slam.mapping.mapper import MappingSchedule, MappingSettings, map_window, mapping_schedule
+from eslam.slam.mapping.warm_start import WarmStart
 from eslam.slam.session import run_slam
 from eslam.slam.state import new_field
 from eslam.slam.views import make_view
-from eslam.slam.warm_start import WarmStart
 from eslam.synthetic import SynthConfig, build_scene, generate_sequence, scene_bound
 from eslam.workflows.demo import DEMO_CONFIG
 from tests.conftest import tiny_config

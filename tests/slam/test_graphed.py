@@ -16,12 +16,12 @@ import pytest
 import torch
 
 from eslam.config import ComputeConfig, ESLAMConfig
-from eslam.slam import graphed
-from eslam.slam.graphed import GraphedRenderTracker, WindowMapper, use_cuda_graphs
-from eslam.slam.mapping import MappingSchedule, MappingSettings, map_window
-from eslam.slam.trackers import make_tracker
-from eslam.slam.tracking import RenderTracker, TrackingSettings, track_frame
-from eslam.slam.warm_start import WarmStart
+from eslam.slam import cuda_graphs as graphed
+from eslam.slam.cuda_graphs import GraphedRenderTracker, WindowMapper, use_cuda_graphs
+from eslam.slam.mapping.mapper import MappingSchedule, MappingSettings, map_window
+from eslam.slam.mapping.warm_start import WarmStart
+from eslam.slam.tracking.render import RenderTracker, TrackingSettings, track_frame
+from eslam.slam.tracking.trackers import make_tracker
 from tests.conftest import close_after_adam
 from tests.slam.test_static_steps import moved, window_views
 from tests.slam.test_steps import BOUND, _setup

@@ -10,7 +10,7 @@ import torch
 
 from eslam.config import MappingConfig
 from eslam.io.checkpoint import load_checkpoint, save_checkpoint
-from eslam.slam.keyframes import (
+from eslam.slam.mapping.keyframes import (
     DEPTH_UNITS_PER_METRE,
     KeyframeStore,
     OverlapWindow,

@@ -12,15 +12,15 @@ import torch
 from eslam.config import ESLAMConfig, SdfTrackerConfig
 from eslam.field.scene_field import SceneField
 from eslam.render.rays import camera_directions
-from eslam.slam.mapping import MappingSettings, WindowPoses, mapping_optimiser, mapping_step
-from eslam.slam.sdf_tracking import Solver, linearise, lm_step, sdf_points, track_sdf
-from eslam.slam.tracking import (
+from eslam.slam.mapping.mapper import MappingSettings, WindowPoses, mapping_optimiser, mapping_step
+from eslam.slam.tracking.render import (
     PoseVariables,
     TrackingSettings,
     frozen,
     pose_optimiser,
     tracking_step,
 )
+from eslam.slam.tracking.sdf import Solver, linearise, lm_step, sdf_points, track_sdf
 from eslam.slam.views import make_view
 from eslam.types import Intrinsics
 from tests.slam.test_sdf_tracking import CAMERA as SDF_CAMERA

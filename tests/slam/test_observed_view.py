@@ -1,4 +1,4 @@
-"""Tracking on observed space only (eslam.slam.observed_view)."""
+"""Tracking on observed space only (eslam.slam.tracking.observed_view)."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import torch
 
 from eslam.mesh.observed import ObservedViews
 from eslam.render.rays import camera_directions
-from eslam.slam.observed_view import observed_pixels
+from eslam.slam.tracking.observed_view import observed_pixels
 from eslam.slam.views import View, make_view, restrict_view, sample_view_pixels, sampleable_mask
 from eslam.types import Intrinsics
 
@@ -95,7 +95,7 @@ def test_a_run_tracks_each_frame_on_its_observed_part(
     """With ``tracking.observed_only`` every tracked frame's view is restricted (some
     frames lose the pixels that came into view since the last keyframe) and the run
     still tracks the synthetic camera."""
-    import eslam.slam.frontend as frontend
+    import eslam.slam.tracking.frontend as frontend
     from eslam.slam.session import run_slam
     from tests.conftest import TINY_FRAMES, tiny_config
 

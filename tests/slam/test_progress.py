@@ -11,8 +11,8 @@ import torch
 import tqdm.std
 
 from eslam.errors import RunInterrupted
-from eslam.slam.observers import FrameDone, MappingStep, RunObserverBase, RunStart
-from eslam.slam.progress import ProgressObserver
+from eslam.slam.run.observers import FrameDone, MappingStep, RunObserverBase, RunStart
+from eslam.slam.run.progress import ProgressObserver
 from eslam.slam.session import run_slam
 from tests.conftest import tiny_config
 

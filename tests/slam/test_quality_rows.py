@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from eslam.slam.state import degenerate_row, degenerate_stretch, quality_row
-from eslam.slam.tracking import TrackingQuality
+from eslam.slam.tracking.base import TrackingQuality
 
 NAN = float("nan")
 

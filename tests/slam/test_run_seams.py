@@ -23,10 +23,10 @@ from eslam.errors import ConfigError, RunInterrupted, RunStopped
 from eslam.geometry.pose import se3_exp
 from eslam.io.checkpoint import load_checkpoint
 from eslam.io.trajectory import read_tum_trajectory
-from eslam.slam.observers import FrameDone, MappingDone, RunEnd, RunObserverBase, RunStart
+from eslam.slam.run.observers import FrameDone, MappingDone, RunEnd, RunObserverBase, RunStart
 from eslam.slam.session import run_slam
-from eslam.slam.trackers import TRACKERS, make_tracker
-from eslam.slam.tracking import TrackingQuality, TrackingResult
+from eslam.slam.tracking.base import TrackingQuality, TrackingResult
+from eslam.slam.tracking.trackers import TRACKERS, make_tracker
 from eslam.workflows.demo import DEMO_CONFIG
 from tests.conftest import TINY, TINY_FRAMES, static_ate_cm, tiny_config
 
@@ -302,7 +302,7 @@ def test_a_map_saved_with_four_quality_columns_still_loads(
     tiny_sequence: Path, tiny_run, tmp_path: Path
 ) -> None:
     from eslam.io.checkpoint import save_checkpoint
-    from eslam.slam.run_writer import run_metrics
+    from eslam.slam.run.writer import run_metrics
     from eslam.slam.state import TRACKING_COLUMNS, load_state
 
     saved = load_checkpoint(tiny_run.run_dir / "map.pt", map_location="cpu")

@@ -17,7 +17,7 @@ from eslam.field.scene_field import SceneField
 from eslam.geometry.pose import pose_distance, se3_exp
 from eslam.losses import depth_noise_scale
 from eslam.render.rays import camera_directions
-from eslam.slam.sdf_tracking import (
+from eslam.slam.tracking.sdf import (
     SdfTracker,
     constrained_directions,
     field_derivatives,

@@ -10,7 +10,7 @@ import torch
 from eslam.field.scene_field import SceneField
 from eslam.geometry.pose import se3_exp
 from eslam.render.rays import camera_directions
-from eslam.slam.mapping import MappingSchedule, MappingSettings, map_window
+from eslam.slam.mapping.mapper import MappingSchedule, MappingSettings, map_window
 from eslam.slam.static_steps import (
     StaticMapping,
     StaticTracking,
@@ -18,7 +18,7 @@ from eslam.slam.static_steps import (
     run_mapping,
     run_tracking,
 )
-from eslam.slam.tracking import TrackingSettings, track_frame
+from eslam.slam.tracking.render import TrackingSettings, track_frame
 from eslam.slam.views import View, make_view
 from tests.conftest import close_after_adam
 from tests.slam.test_steps import CAMERA, _setup

@@ -13,7 +13,7 @@ from eslam.config import ESLAMConfig
 from eslam.field.scene_field import SceneField
 from eslam.render.rays import camera_directions
 from eslam.render.renderer import render_rays
-from eslam.slam.mapping import (
+from eslam.slam.mapping.mapper import (
     MappingSchedule,
     MappingSettings,
     WindowPoses,
@@ -23,7 +23,7 @@ from eslam.slam.mapping import (
     mapping_schedule,
     mapping_step,
 )
-from eslam.slam.tracking import (
+from eslam.slam.tracking.render import (
     PoseVariables,
     TrackingSettings,
     frozen,
@@ -227,8 +227,8 @@ def test_a_compiled_tracking_loss_tracks_as_the_eager_one() -> None:
     test compiles with the aot_eager backend (the same trace and autograd split as
     inductor, without a C++ build; inductor's speed is benchmarks/bench_compile.py's)."""
     from eslam.config import ComputeConfig
-    from eslam.slam.trackers import make_tracker
-    from eslam.slam.tracking import compiled_tracking_loss, track_frame, tracking_loss
+    from eslam.slam.tracking.render import compiled_tracking_loss, track_frame, tracking_loss
+    from eslam.slam.tracking.trackers import make_tracker
 
     config, field, view = _setup()
     compiled = dataclasses.replace(config, compute=ComputeConfig(compile="tracking"))

@@ -8,8 +8,8 @@ from pathlib import Path
 import pytest
 
 from eslam.errors import InputError, RunInterrupted, RunStopped
-from eslam.slam.observers import Observers, RunObserverBase
-from eslam.slam.stops import interrupted_early, save_on_failure, stopped_error
+from eslam.slam.run.observers import Observers, RunObserverBase
+from eslam.slam.run.stops import interrupted_early, save_on_failure, stopped_error
 
 RUN = Path("runs/room0")
 

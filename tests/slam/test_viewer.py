@@ -13,9 +13,9 @@ import torch
 
 from eslam.config import DataConfig, ViewerConfig, load_config
 from eslam.data import open_sequence
-from eslam.slam.observers import FrameDone, MappingDone, RunEnd, RunStart
+from eslam.slam.run.observers import FrameDone, MappingDone, RunEnd, RunStart
+from eslam.slam.run.viewer import ViewerObserver
 from eslam.slam.state import load_state
-from eslam.slam.viewer import ViewerObserver
 
 
 class RecordingSink:
@@ -129,7 +129,7 @@ def test_without_a_viewer_option_nothing_of_the_viewer_is_imported() -> None:
         "import argparse, sys, eslam.cli as cli; "
         "args = argparse.Namespace(viewer=None, viewer_save=None); "
         "observers = cli._viewer(args, None, None).__enter__(); "
-        "names = ('rerun', 'eslam.slam.viewer', 'eslam.viz.rerun_viewer', "
+        "names = ('rerun', 'eslam.slam.run.viewer', 'eslam.viz.rerun_viewer', "
         "'eslam.workflows.live_viewer'); "
         "print(observers, sorted(m for m in names if m in sys.modules))"
     )
@@ -140,8 +140,8 @@ def test_without_a_viewer_option_nothing_of_the_viewer_is_imported() -> None:
 
 
 def test_the_tracking_plots_show_the_information_where_the_tracker_computed_it():
-    from eslam.slam.tracking import TrackingQuality
-    from eslam.slam.viewer import frame_scalars
+    from eslam.slam.run.viewer import frame_scalars
+    from eslam.slam.tracking.base import TrackingQuality
 
     pose = torch.eye(4)
     judged = TrackingQuality(4, 0.9, 0.002, False, information=0.003, degenerate_directions=1)
@@ -155,7 +155,7 @@ def test_the_tracking_plots_show_the_information_where_the_tracker_computed_it()
 
 
 def test_dropped_frames_are_the_stream_position_ahead_of_the_run_position(tiny_sequence):
-    from eslam.slam.viewer import frame_scalars
+    from eslam.slam.run.viewer import frame_scalars
 
     image = open_sequence(DataConfig(path=str(tiny_sequence)))[3]  # the stream's 4th frame
     pose = torch.eye(4)

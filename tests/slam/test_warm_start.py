@@ -1,4 +1,4 @@
-"""The TSDF warm start of the first frame (eslam/slam/warm_start.py)."""
+"""The TSDF warm start of the first frame (eslam/slam/mapping/warm_start.py)."""
 
 from __future__ import annotations
 
@@ -10,14 +10,14 @@ from eslam.config import ESLAMConfig, LossConfig
 from eslam.field.scene_field import SceneField
 from eslam.losses import sdf_loss_terms
 from eslam.render.rays import camera_directions
-from eslam.slam.mapping import MappingSettings, map_window, mapping_schedule
-from eslam.slam.views import make_view
-from eslam.slam.warm_start import (
+from eslam.slam.mapping.mapper import MappingSettings, map_window, mapping_schedule
+from eslam.slam.mapping.warm_start import (
     WarmStart,
     projective_tsdf,
     tsdf_warm_start,
     warm_start_points,
 )
+from eslam.slam.views import make_view
 from tests.slam.test_steps import BOUND, CAMERA
 
 T = 0.06

@@ -11,7 +11,7 @@ import pytest
 from eslam.cli import EXIT_USER_ERROR, main
 from eslam.config import load_config
 from eslam.io.mesh_files import read_mesh_ply
-from eslam.slam.remesh import remesh_run
+from eslam.slam.run.remesh import remesh_run
 from eslam.slam.session import run_slam
 from eslam.synthetic import SynthConfig, read_synthetic_bound, write_synthetic_sequence
 from eslam.workflows.demo import DEMO_CONFIG

@@ -1,9 +1,9 @@
 """The tracking front end: one frame in, its pose and the tracker's judgement out.
 
 :class:`TrackingFrontEnd` prepares the frame's :class:`~eslam.slam.views.View`, takes
-the motion model's guess (:func:`~eslam.slam.trackers.predict_pose`), applies its view
-filters (:mod:`eslam.slam.view_filters`), runs the tracker (``tracking.method``, from
-:data:`~eslam.slam.trackers.TRACKERS`) and judges the result: a failed frame (the
+the motion model's guess (:func:`~eslam.slam.tracking.trackers.predict_pose`), applies its view
+filters (:mod:`eslam.slam.tracking.view_filters`), runs the tracker (``tracking.method``, from
+:data:`~eslam.slam.tracking.trackers.TRACKERS`) and judges the result: a failed frame (the
 tracker said so, or its pose is not finite) keeps the guess. The run loop appends the
 answer, a :class:`TrackedFrame`, to the trajectory; observers report it.
 
@@ -21,12 +21,12 @@ from typing import Protocol
 
 import torch
 
-from eslam.slam.bounds_policy import first_pose
 from eslam.slam.context import RunContext
+from eslam.slam.mapping.bounds_policy import first_pose
 from eslam.slam.state import SLAMState, failed_row
-from eslam.slam.trackers import Tracker, make_tracker, motion_guess
-from eslam.slam.tracking import TrackingQuality, TrackingResult
-from eslam.slam.view_filters import ViewFilter, make_filters
+from eslam.slam.tracking.base import Tracker, TrackingQuality, TrackingResult
+from eslam.slam.tracking.trackers import make_tracker, motion_guess
+from eslam.slam.tracking.view_filters import ViewFilter, make_filters
 from eslam.slam.views import View, make_view, restrict_view, upload_frame
 from eslam.types import Frame
 
@@ -109,7 +109,7 @@ class TrackingFrontEnd:
 
     def guess(self, state: SLAMState) -> torch.Tensor:
         """The motion model's pose for the next frame of ``state``
-        (:func:`~eslam.slam.trackers.motion_guess`; whether the last frame failed is
+        (:func:`~eslam.slam.tracking.trackers.motion_guess`; whether the last frame failed is
         read from its quality row)."""
         rows = state.tracking_quality
         after_failure = bool(rows) and failed_row(rows[-1])

@@ -10,7 +10,7 @@ optimiser is made per call, as in the release, so the map file needs no optimise
 :func:`mapping_step` is one iteration and never synchronises with the host; the
 benchmarks time this same function. :func:`mapping_schedule` says how long each call
 optimises (the first frame longer and faster, as the release does, or after a TSDF
-warm start, :mod:`eslam.slam.warm_start`).
+warm start, :mod:`eslam.slam.mapping.warm_start`).
 """
 
 from __future__ import annotations
@@ -26,6 +26,7 @@ from eslam.config import LossConfig, MappingConfig, RenderConfig
 from eslam.field.scene_field import SceneField
 from eslam.geometry.pose import pose_from_quaternion_translation, quaternion_translation_from_pose
 from eslam.losses import compute_losses, depth_noise_weights
+from eslam.slam.mapping.warm_start import WarmStart, tsdf_warm_start
 from eslam.slam.views import (
     RayDraws,
     View,
@@ -35,7 +36,6 @@ from eslam.slam.views import (
     render_drawn,
     view_rays,
 )
-from eslam.slam.warm_start import WarmStart, tsdf_warm_start
 from eslam.stages import stage
 
 
@@ -71,7 +71,7 @@ class MappingSchedule:
         rays: rays per step over the whole window.
         lr_decay: the map learning rates end at this fraction of their start (cosine).
         warm_start: a TSDF regression on the window's first view before the rendering
-            steps (:mod:`eslam.slam.warm_start`), or None.
+            steps (:mod:`eslam.slam.mapping.warm_start`), or None.
     """
 
     iterations: int
@@ -267,7 +267,7 @@ def warm_start_window(
     generator: torch.Generator,
 ) -> None:
     """The TSDF warm start of ``schedule`` (if it has one) on ``views[0]`` at ``poses[0]``:
-    what a mapping call runs before its rendering steps (:mod:`eslam.slam.warm_start`)."""
+    what a mapping call runs before its rendering steps (:mod:`eslam.slam.mapping.warm_start`)."""
     if schedule.warm_start is not None:
         tsdf_warm_start(
             field,

@@ -33,11 +33,11 @@ from eslam.errors import OutputError, RunStopped
 from eslam.evaluate.trajectory import absolute_trajectory_error, relative_pose_error
 from eslam.io.run_dir import RunDirectory, write_json
 from eslam.io.trajectory import write_tum_trajectory
-from eslam.slam.observers import FrameDone, RunEnd, RunObserverBase, RunStart
-from eslam.slam.progress import finite_ate_pairs
-from eslam.slam.resources import PeakMemory
+from eslam.slam.run.observers import FrameDone, RunEnd, RunObserverBase, RunStart
+from eslam.slam.run.progress import finite_ate_pairs
+from eslam.slam.run.resources import PeakMemory
+from eslam.slam.run.stream_report import stream_metrics
 from eslam.slam.state import TRACKING_COLUMNS, SLAMState, degenerate_row, save_state
-from eslam.slam.stream_report import stream_metrics
 
 
 @dataclass(frozen=True)

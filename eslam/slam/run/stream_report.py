@@ -11,7 +11,7 @@ from __future__ import annotations
 import logging
 
 from eslam.data.realtime import LatestFrameReader, StreamCounts
-from eslam.slam.observers import FrameDone, RunEnd, RunObserverBase
+from eslam.slam.run.observers import FrameDone, RunEnd, RunObserverBase
 
 
 def stream_metrics(counts: StreamCounts, processed: int) -> dict:

@@ -3,11 +3,11 @@
 :class:`KeyframeBackEnd` (``mapping.back_end: keyframes``, the paper's) builds the
 field from the first frame with depth (when ``scene.bound`` is not set), makes every
 ``mapping.every``-th tracked frame a keyframe, grows the bound to hold its depth
-(:func:`~eslam.slam.bounds_policy.cover_keyframe`), chooses the window
+(:func:`~eslam.slam.mapping.bounds_policy.cover_keyframe`), chooses the window
 (``mapping.selection``), keeps the window's oldest keyframe fixed, and runs the mapper
-(eager, or CUDA-graphed with ``compute.cuda_graphs``: :class:`~eslam.slam.graphed.WindowMapper`).
-At the end of the stream its last frame is mapped too. Mapping calls are reported to
-the run's observers.
+(eager, or CUDA-graphed with ``compute.cuda_graphs``:
+:class:`~eslam.slam.cuda_graphs.WindowMapper`). At the end of the stream its last frame
+is mapped too. Mapping calls are reported to the run's observers.
 
 Its state between frames lives in the run's :class:`~eslam.slam.state.SLAMState`
 (the keyframes, the window strategy, and ``components["back_end"]``: whether the bound
@@ -27,20 +27,20 @@ from eslam.data.depth_units import DepthCheck
 from eslam.errors import InputError
 from eslam.field.scene_field import SceneField
 from eslam.registry import Registry
-from eslam.slam.bounds_policy import (
+from eslam.slam.context import RunContext
+from eslam.slam.cuda_graphs import WindowMapper
+from eslam.slam.mapping.bounds_policy import (
     bound_from_frame,
     check_depth_found,
     check_some_depth,
     cover_keyframe,
 )
-from eslam.slam.context import RunContext
-from eslam.slam.frontend import TrackedFrame
-from eslam.slam.graphed import WindowMapper
-from eslam.slam.keyframe_views import KeyframeViews
-from eslam.slam.keyframes import KeyframeSchedule
-from eslam.slam.mapping import MappingSettings, mapping_schedule
-from eslam.slam.observers import MappingDone, MappingStep
+from eslam.slam.mapping.keyframe_views import KeyframeViews
+from eslam.slam.mapping.keyframes import KeyframeSchedule
+from eslam.slam.mapping.mapper import MappingSettings, mapping_schedule
+from eslam.slam.run.observers import MappingDone, MappingStep
 from eslam.slam.state import FrameMark, SLAMState, new_field
+from eslam.slam.tracking.frontend import TrackedFrame
 from eslam.types import Frame
 
 

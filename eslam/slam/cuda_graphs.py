@@ -22,8 +22,8 @@ after which a mapping call replays the graph it has (the overlap window policy m
 vary W: the :data:`GRAPHS_KEPT` most recent are kept).
 
 Otherwise (``off``, a CPU or MPS device, a torch without what is needed) the eager
-steps run: :func:`~eslam.slam.tracking.track_frame` and
-:func:`~eslam.slam.mapping.map_window`, unchanged. ``auto`` falling back is logged once.
+steps run: :func:`~eslam.slam.tracking.render.track_frame` and
+:func:`~eslam.slam.mapping.mapper.map_window`, unchanged. ``auto`` falling back is logged once.
 """
 
 from __future__ import annotations
@@ -39,7 +39,7 @@ import torch
 
 from eslam.field.scene_field import SceneField
 from eslam.render.renderer import SceneFieldLike
-from eslam.slam.mapping import (
+from eslam.slam.mapping.mapper import (
     MappingResult,
     MappingSchedule,
     MappingSettings,
@@ -55,7 +55,8 @@ from eslam.slam.static_steps import (
     same_tensors,
     view_shape,
 )
-from eslam.slam.tracking import RenderTracker, TrackingResult, TrackingSettings, frozen
+from eslam.slam.tracking.base import TrackingResult
+from eslam.slam.tracking.render import RenderTracker, TrackingSettings, frozen
 from eslam.slam.views import View
 
 log = logging.getLogger("eslam")
@@ -181,7 +182,7 @@ class TrackingGraphs:
         initial_pose: torch.Tensor,
         generator: torch.Generator,
     ) -> TrackingResult | None:
-        """The pose of ``view`` as :func:`~eslam.slam.tracking.track_frame`, each
+        """The pose of ``view`` as :func:`~eslam.slam.tracking.render.track_frame`, each
         iteration a replay (captured first when needed); None when a capture failed."""
         static = self.static
         if static is None or static.shape != view_shape(view):
@@ -239,7 +240,7 @@ class GraphedRenderTracker(RenderTracker):
 
 
 class WindowMapper:
-    """Mapping calls: :func:`~eslam.slam.mapping.map_window`, or its iterations as
+    """Mapping calls: :func:`~eslam.slam.mapping.mapper.map_window`, or its iterations as
     CUDA-graph replays where :func:`use_cuda_graphs` says so and capturing works
     (module doc).
 
@@ -271,7 +272,7 @@ class WindowMapper:
         generator: torch.Generator,
         on_step: Callable[[int], None] | None = None,
     ) -> MappingResult:
-        """One mapping call, as :func:`~eslam.slam.mapping.map_window` (same arguments)."""
+        """One mapping call, as :func:`~eslam.slam.mapping.mapper.map_window` (same arguments)."""
         graphs = (
             schedule.iterations > 0
             and not self.failed

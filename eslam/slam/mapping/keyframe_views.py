@@ -14,7 +14,7 @@ from collections import OrderedDict
 
 import torch
 
-from eslam.slam.keyframes import KeyframeStore
+from eslam.slam.mapping.keyframes import KeyframeStore
 from eslam.slam.views import View, make_view
 
 BYTES_PER_MB = 1e6

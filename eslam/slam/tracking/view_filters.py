@@ -2,7 +2,7 @@
 
 A filter answers which of a frame's pixels to keep, given the frame's
 :class:`~eslam.slam.views.View`, the motion model's guess and the run's state; the
-tracking front end (:mod:`eslam.slam.frontend`) applies its filters in order and tracks
+tracking front end (:mod:`eslam.slam.tracking.frontend`) applies its filters in order and tracks
 on what is left. Filters are built by name from :data:`VIEW_FILTERS` with the run's
 :class:`~eslam.slam.context.RunContext`; :func:`configured_filters` lists the names the
 config turns on.
@@ -17,7 +17,7 @@ import torch
 from eslam.config import ESLAMConfig
 from eslam.registry import Registry
 from eslam.slam.context import RunContext
-from eslam.slam.observed_view import observed_pixels
+from eslam.slam.tracking.observed_view import observed_pixels
 from eslam.slam.views import View
 
 if TYPE_CHECKING:
@@ -38,7 +38,7 @@ class ViewFilter(Protocol):
 
 class ObservedSpace:
     """Keeps the pixels in space a keyframe observed (``tracking.observed_only``;
-    :mod:`eslam.slam.observed_view`)."""
+    :mod:`eslam.slam.tracking.observed_view`)."""
 
     name = "observed"
 

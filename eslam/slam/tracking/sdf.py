@@ -75,7 +75,8 @@ from eslam.config import SdfTrackerConfig
 from eslam.geometry.pose import pose_distance, se3_exp
 from eslam.losses import depth_noise_scale
 from eslam.render.renderer import SceneFieldLike
-from eslam.slam.tracking import RenderTracker, TrackingQuality, TrackingResult, frozen
+from eslam.slam.tracking.base import TrackingQuality, TrackingResult
+from eslam.slam.tracking.render import RenderTracker, frozen
 from eslam.slam.views import View, pixels_from_uniforms
 
 
@@ -507,7 +508,7 @@ def track_sdf(
 
 @dataclass(frozen=True)
 class SdfTracker:
-    """The SDF tracker behind the :class:`~eslam.slam.trackers.Tracker` protocol."""
+    """The SDF tracker behind the :class:`~eslam.slam.tracking.base.Tracker` protocol."""
 
     config: SdfTrackerConfig
 

@@ -17,7 +17,7 @@ import numpy as np
 
 from eslam.data.realtime import LatestFrameReader
 from eslam.evaluate.trajectory import absolute_trajectory_error
-from eslam.slam.observers import FrameDone, MappingStep, RunEnd, RunObserverBase, RunStart
+from eslam.slam.run.observers import FrameDone, MappingStep, RunEnd, RunObserverBase, RunStart
 
 ATE_EVERY = 10
 """Frames between updates of the running ATE shown in the progress bar."""

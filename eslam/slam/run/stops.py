@@ -1,7 +1,7 @@
 """What a stopped run raises: every stop a user can cause names ``eslam resume RUN``.
 
 The run loop rolls a failed frame back and the run writer saves the completed frames
-(:mod:`eslam.slam.run_writer`); this module turns the error into the one line the CLI
+(:mod:`eslam.slam.run.writer`); this module turns the error into the one line the CLI
 prints (:class:`~eslam.errors.RunStopped`, exit 2, or
 :class:`~eslam.errors.RunInterrupted`, exit 130), so the user learns what was saved and
 the exact command that continues the run.
@@ -16,7 +16,7 @@ import torch
 
 from eslam.errors import ESLAMError, RunInterrupted, RunStopped
 from eslam.io.run_dir import RunDirectory
-from eslam.slam.observers import Observers
+from eslam.slam.run.observers import Observers
 
 
 def save_on_failure(

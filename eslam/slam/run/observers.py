@@ -3,7 +3,7 @@
 The loop calls every observer at the run's start, after each frame, at the start and
 after each iteration of a mapping call, after each mapping call, at the finish and on a
 failure; observers never change the run. The run writer
-(:mod:`eslam.slam.run_writer`), the progress bar (:mod:`eslam.slam.progress`) and the
+(:mod:`eslam.slam.run.writer`), the progress bar (:mod:`eslam.slam.run.progress`) and the
 log lines (:class:`LogObserver`) are observers; a viewer or a live trajectory stream are
 more of them, passed to :func:`eslam.slam.session.run_slam` as ``observers=``.
 
@@ -22,7 +22,7 @@ from typing import TYPE_CHECKING, Protocol
 import torch
 
 from eslam.config import ESLAMConfig
-from eslam.slam.tracking import TrackingQuality
+from eslam.slam.tracking.base import TrackingQuality
 from eslam.types import Frame
 
 if TYPE_CHECKING:

@@ -26,7 +26,7 @@ import torch
 from eslam.config import ViewerConfig
 from eslam.mesh.extract import extract_mesh
 from eslam.render.surface import render_novel_view
-from eslam.slam.observers import FrameDone, MappingDone, RunEnd, RunObserverBase, RunStart
+from eslam.slam.run.observers import FrameDone, MappingDone, RunEnd, RunObserverBase, RunStart
 from eslam.types import Intrinsics, TriangleMesh
 
 

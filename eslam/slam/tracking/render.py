@@ -24,6 +24,7 @@ from eslam.config import LossConfig, RenderConfig, RenderTrackerConfig
 from eslam.geometry.pose import pose_from_quaternion_translation, quaternion_translation_from_pose
 from eslam.losses import compute_losses
 from eslam.render.renderer import SceneFieldLike
+from eslam.slam.tracking.base import TrackingResult
 from eslam.slam.views import (
     RayDraws,
     View,
@@ -42,48 +43,6 @@ class TrackingSettings:
     tracking: RenderTrackerConfig
     render: RenderConfig
     loss: LossConfig
-
-
-@dataclass(frozen=True)
-class TrackingQuality:
-    """How well a frame was tracked (trackers that can tell).
-
-    Attributes:
-        iterations: solver iterations taken.
-        inlier_fraction: share of the frame's points that fit the map.
-        residual_m: robust RMS residual of the inliers, metres.
-        failed: the tracker judged the pose unusable (the loop keeps the motion model's
-            pose and makes the frame no keyframe).
-        information: the smallest eigenvalue of the points' normalised information at the
-            final pose (about 1 along a direction every point's normal sees, 0 along one
-            no point constrains: sliding along a wall); NaN where not computed.
-        degenerate_directions: pose directions below the tracker's degeneracy threshold
-            (along them the pose is the motion model's, not measured); None when the
-            tracker has no such test or it is off.
-    """
-
-    iterations: int
-    inlier_fraction: float
-    residual_m: float
-    failed: bool
-    information: float = float("nan")
-    degenerate_directions: int | None = None
-
-
-@dataclass(frozen=True, eq=False)
-class TrackingResult:
-    """Outcome of tracking one frame.
-
-    Attributes:
-        pose: (4, 4) float32 camera-to-world pose with the lowest loss.
-        loss: 0-d tensor on the compute device, that lowest loss (read it with
-            ``float()`` between frames, not inside the iterations).
-        quality: the tracker's own judgement, or None (the rendering tracker has none).
-    """
-
-    pose: torch.Tensor
-    loss: torch.Tensor
-    quality: TrackingQuality | None = None
 
 
 class frozen:
@@ -251,7 +210,7 @@ def track_frame(
 
 @dataclass(frozen=True)
 class RenderTracker:
-    """The paper's tracker behind the :class:`~eslam.slam.trackers.Tracker` protocol.
+    """The paper's tracker behind the :class:`~eslam.slam.tracking.base.Tracker` protocol.
 
     ``loss_function``: :func:`tracking_loss`, or its compiled version with
     ``compute.compile: tracking``.

@@ -1,7 +1,7 @@
 """What a frame's tracking says in the run's log: frames without depth, failed frames,
 frames a view filter emptied, and where a stretch of degenerate views begins and ends.
 
-:class:`FrameLogObserver` reads each :class:`~eslam.slam.observers.FrameDone`; the
+:class:`FrameLogObserver` reads each :class:`~eslam.slam.run.observers.FrameDone`; the
 front end and the loop only report. A resumed run picks up a degenerate stretch where
 the checkpoint left it (the quality rows are saved).
 """
@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import logging
 
-from eslam.slam.observers import FrameDone, RunObserverBase, RunStart
+from eslam.slam.run.observers import FrameDone, RunObserverBase, RunStart
 from eslam.slam.state import degenerate_row, degenerate_stretch, quality_row
 
 

@@ -9,43 +9,26 @@ registered in :data:`TRACKERS` (a built-in one's name is also in the config's
 from __future__ import annotations
 
 import dataclasses
-from typing import Protocol
 
 import torch
 
 from eslam.config import ESLAMConfig, HybridTrackerConfig, RenderTrackerConfig, SdfTrackerConfig
 from eslam.geometry.pose import extrapolate_constant_velocity
 from eslam.registry import Registry
-from eslam.render.renderer import SceneFieldLike
-from eslam.slam.graphed import GraphedRenderTracker
-from eslam.slam.sdf_tracking import HybridTracker, SdfTracker
-from eslam.slam.tracking import (
+from eslam.slam.cuda_graphs import GraphedRenderTracker
+from eslam.slam.tracking.base import Tracker
+from eslam.slam.tracking.render import (
     RenderTracker,
-    TrackingResult,
     TrackingSettings,
     compiled_tracking_loss,
     tracking_loss,
 )
-from eslam.slam.views import View
-
-
-class Tracker(Protocol):
-    """Estimates one frame's camera-to-world pose against the frozen map."""
-
-    def track(
-        self,
-        field: SceneFieldLike,
-        view: View,
-        initial_pose: torch.Tensor,
-        generator: torch.Generator,
-    ) -> TrackingResult:
-        """Pose of ``view`` (the frame's images on the device), starting at ``initial_pose``."""
-        ...
+from eslam.slam.tracking.sdf import HybridTracker, SdfTracker
 
 
 def _renderer(config: ESLAMConfig, settings: TrackingSettings) -> RenderTracker:
     """The rendering tracker with ``settings``; with ``compute.cuda_graphs`` not off, the
-    one that replays CUDA graphs where it can (:mod:`eslam.slam.graphed`; the replays
+    one that replays CUDA graphs where it can (:mod:`eslam.slam.cuda_graphs`; the replays
     do not use the compiled loss); its loss compiled with ``compute.compile: tracking``."""
     loss = compiled_tracking_loss() if config.compute.compile == "tracking" else tracking_loss
     if config.compute.cuda_graphs == "off":
