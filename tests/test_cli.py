@@ -270,6 +270,7 @@ def test_sigterm_stops_a_command_like_ctrl_c(
     import time
 
     import eslam.cli as cli
+    from eslam.cli import resume
 
     def terminated(args) -> int:
         os.kill(os.getpid(), signal.SIGTERM)
@@ -277,7 +278,7 @@ def test_sigterm_stops_a_command_like_ctrl_c(
         return 0
 
     before = signal.getsignal(signal.SIGTERM)
-    monkeypatch.setattr(cli, "_command_resume", terminated)
+    monkeypatch.setattr(resume, "handle", terminated)
     assert cli.main(["resume", "somewhere"]) == 130
     assert "eslam resume: interrupted" in capsys.readouterr().err
     assert signal.getsignal(signal.SIGTERM) == before  # restored after the command

@@ -126,9 +126,9 @@ def test_without_a_viewer_option_nothing_of_the_viewer_is_imported() -> None:
     """Cost when off: `eslam run` without --viewer / --viewer-save imports no rerun and
     none of the viewer's modules, and passes no observer."""
     code = (
-        "import argparse, sys, eslam.cli as cli; "
+        "import argparse, sys, eslam.cli.runs as runs; "
         "args = argparse.Namespace(viewer=None, viewer_save=None); "
-        "observers = cli._viewer(args, None, None).__enter__(); "
+        "observers = runs.viewer(args, None, None).__enter__(); "
         "names = ('rerun', 'eslam.slam.run.viewer', 'eslam.viz.rerun_viewer', "
         "'eslam.workflows.live_viewer'); "
         "print(observers, sorted(m for m in names if m in sys.modules))"
