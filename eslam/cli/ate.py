@@ -1,10 +1,18 @@
-"""``eslam ate``: absolute trajectory error (and relative pose error) of two trajectories."""
+"""``eslam ate``: absolute trajectory error (and relative pose error) of two trajectories.
+
+The errors come from :func:`eslam.workflows.trajectory_metrics.trajectory_errors`; this
+module parses the arguments and prints the table or JSON.
+"""
 
 from __future__ import annotations
 
 import argparse
 
 from eslam.cli.args import non_negative_float
+
+ALIGNMENTS = ("se3", "sim3")
+"""``--align``'s choices: :data:`eslam.workflows.trajectory_metrics.ALIGNMENTS` (a test
+holds them equal; the workflow is not imported to build the parser)."""
 
 
 def add(commands: argparse._SubParsersAction) -> None:
@@ -24,7 +32,7 @@ def add(commands: argparse._SubParsersAction) -> None:
     ate.add_argument("est", metavar="EST", help="estimated trajectory file or run folder")
     ate.add_argument(
         "--align",
-        choices=("se3", "sim3"),
+        choices=ALIGNMENTS,
         default="se3",
         help="rigid (se3, the paper's) or similarity (sim3) alignment",
     )
@@ -41,25 +49,11 @@ def add(commands: argparse._SubParsersAction) -> None:
 
 def handle(args: argparse.Namespace) -> int:
     """Print the trajectory errors as a table, or as JSON with both paths."""
-    from eslam.errors import InputError
     from eslam.evaluate.report import titled_table
-    from eslam.evaluate.trajectory import TimedPoses, trajectory_ate, trajectory_rpe
     from eslam.io.run_dir import json_text
-    from eslam.io.trajectory import read_trajectory
+    from eslam.workflows.trajectory_metrics import trajectory_errors
 
-    gt = TimedPoses(*read_trajectory(args.gt, ground_truth=True, allow_missing=True))
-    est = TimedPoses(*read_trajectory(args.est, allow_missing=True))
-    try:
-        result = trajectory_ate(gt, est, args.align == "sim3", args.max_diff)
-    except ValueError as error:
-        raise InputError(
-            args.est, str(error), "check that both files cover the same frames, or --max-diff"
-        ) from None
-    metrics = {**result.as_dict(), "align": args.align, "max_diff_s": args.max_diff}
-    try:  # relative motions need no alignment; a pair needs two consecutive matched poses
-        metrics.update(trajectory_rpe(gt, est, 1, args.max_diff).as_dict())
-    except ValueError:
-        pass  # no consecutive finite pair: the ATE stands alone
+    metrics = trajectory_errors(args.gt, args.est, args.align, args.max_diff).as_dict()
     if args.json:
         print(json_text({**metrics, "gt": args.gt, "est": args.est}))
     else:

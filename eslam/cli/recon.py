@@ -1,5 +1,9 @@
 """``eslam recon``: accuracy / completion / ratio / F1 (and depth L1) of a mesh against a
-ground-truth mesh."""
+ground-truth mesh.
+
+The errors come from :func:`eslam.workflows.reconstruction_metrics.mesh_errors`; this
+module parses the arguments and prints the table or JSON.
+"""
 
 from __future__ import annotations
 
@@ -54,31 +58,23 @@ def add(commands: argparse._SubParsersAction) -> None:
 
 def handle(args: argparse.Namespace) -> int:
     """Print the mesh errors as a table, or as JSON with both mesh files."""
-    from eslam.errors import ConfigError, InputError
-    from eslam.evaluate.depth_l1 import DepthL1Options, depth_l1
-    from eslam.evaluate.reconstruction import ReconstructionOptions, evaluate_reconstruction
     from eslam.evaluate.report import titled_table
-    from eslam.io.mesh_files import find_mesh, read_mesh
     from eslam.io.run_dir import json_text
+    from eslam.workflows.reconstruction_metrics import mesh_errors
 
-    rec_path, gt_path = find_mesh(args.rec), find_mesh(args.gt)
-    reconstruction, ground_truth = read_mesh(rec_path), read_mesh(gt_path)
-    options = ReconstructionOptions(samples=args.samples, seed=args.seed, exact=args.exact)
-    try:
-        metrics: dict[str, object] = evaluate_reconstruction(
-            reconstruction, ground_truth, options
-        ).as_dict()
-    except ValueError as error:
-        raise InputError(rec_path, str(error), "check both meshes have triangles") from None
-    if args.depth_l1:
-        uncut = read_mesh(args.gt_uncut) if args.gt_uncut else None
-        depth_options = DepthL1Options(views=args.views, seed=args.seed)
-        try:
-            metrics.update(depth_l1(reconstruction, ground_truth, depth_options, uncut).as_dict())
-        except ImportError as error:
-            raise ConfigError(f"--depth-l1: {error}") from None
+    result = mesh_errors(
+        args.rec,
+        args.gt,
+        samples=args.samples,
+        seed=args.seed,
+        exact=args.exact,
+        depth_l1=args.depth_l1,
+        views=args.views,
+        gt_uncut=args.gt_uncut,
+    )
+    metrics = result.as_dict()
     if args.json:
-        print(json_text({**metrics, "rec": rec_path, "gt": gt_path}))
+        print(json_text({**metrics, "rec": result.rec, "gt": result.gt}))
     else:
-        print(titled_table(f"reconstruction {rec_path} against {gt_path}", metrics))
+        print(titled_table(f"reconstruction {result.rec} against {result.gt}", metrics))
     return 0
