@@ -7,6 +7,11 @@ import argparse
 
 from eslam.cli.args import positive_int
 
+BACKENDS = ("local", "ray")
+"""``--backend``'s choices: the names of
+:data:`eslam.workflows.sweep.SWEEP_BACKENDS` (a test holds them equal; that module
+imports torch, so building the parser does not import it)."""
+
 
 def add(commands: argparse._SubParsersAction) -> None:
     """Add ``sweep`` and ``table`` to ``commands``."""
@@ -23,7 +28,7 @@ def add(commands: argparse._SubParsersAction) -> None:
     sweep.add_argument("sweep", metavar="SWEEP", help="sweep file (YAML)")
     sweep.add_argument("overrides", nargs="*", metavar="key=value", help="every cell, last")
     sweep.add_argument("--out", required=True, help="output folder (shared by all Ray nodes)")
-    sweep.add_argument("--backend", choices=("local", "ray"), default="local", help="(local)")
+    sweep.add_argument("--backend", choices=BACKENDS, default="local", help="(local)")
     sweep.add_argument(
         "--jobs", type=positive_int, default=1, help="local: cells at a time, in processes (1)"
     )

@@ -11,9 +11,10 @@ report.md) and cell.json, the cell's status::
      the evaluation settings of a done cell, "seconds": ..., "dataset": ..., "variant":
      ..., "seed": ..., "paper_scene": ..., "paper_experiment": ...}
 
-Backends: ``local`` runs cells one after another in this process (``jobs`` = 1) or in
-``jobs`` spawned worker processes; ``ray`` submits each cell as a Ray task asking for
-the sweep's ``resources`` (Ray, the ``[cluster]`` extra, is imported only here).
+Backends (:data:`SWEEP_BACKENDS`, a :class:`~eslam.registry.Registry`): ``local`` runs
+cells one after another in this process (``jobs`` = 1) or in ``jobs`` spawned worker
+processes; ``ray`` submits each cell as a Ray task asking for the sweep's ``resources``
+(Ray, the ``[cluster]`` extra, is imported only here).
 Each cell's torch thread count is its ``threads`` setting (``resources.cpus`` unless
 overridden), set in the process that runs it.
 
@@ -41,6 +42,7 @@ from eslam.config import ESLAMConfig, load_config
 from eslam.config.packaged import find_config
 from eslam.errors import ConfigError, ESLAMError, InputError
 from eslam.io.run_dir import RunDirectory, json_text, write_json
+from eslam.registry import Registry
 from eslam.slam.run.folder import absolute_data_path
 from eslam.slam.session import run_slam
 from eslam.synthetic import read_synthetic_bound
@@ -51,7 +53,6 @@ CELL_FILE = "cell.json"
 """The status file of a cell (module docstring)."""
 SWEEP_FILE = "sweep.json"
 """DIR/sweep.json: the grid of the last sweep into DIR (dataset, variant order for tables)."""
-BACKENDS = ("local", "ray")
 SYNTHETIC_MARKER = "synth.json"
 """A sequence folder holding it is a synthetic scene: its cells get its exact bound."""
 
@@ -371,6 +372,15 @@ def _run_cell_in_worker(cell: Cell) -> CellOutcome:
 
 Report = Callable[[CellOutcome], None]
 
+RunCells = Callable[[Sequence[Cell], SweepFile, int, str | None, Report], None]
+"""A sweep backend: ``run(cells, sweep, jobs, address, record)`` runs ``cells`` and calls
+``record(outcome)`` as each one finishes (module docstring)."""
+
+SWEEP_BACKENDS: Registry[None] = Registry("sweep backend", "backend")
+"""The ways to run a sweep's cells, by the name ``run_sweep(backend=...)`` (``eslam sweep
+--backend``) takes. An entry's factory is a :data:`RunCells`: it runs the cells (it
+returns nothing). Built in: ``local`` and ``ray`` (registered below their functions)."""
+
 
 def run_sweep(
     sweep: SweepFile,
@@ -387,7 +397,7 @@ def run_sweep(
         sweep: the parsed sweep file.
         out: the output folder (with Ray on several machines: a folder every node reaches
             at the same path).
-        backend: ``local`` or ``ray``.
+        backend: a name of :data:`SWEEP_BACKENDS` (``local`` or ``ray``).
         jobs: local backend: cells at a time (worker processes when > 1).
         address: ray backend: the cluster to join (``auto``, ``host:6379``); None starts
             a local one (or uses the one this process already initialised).
@@ -395,11 +405,11 @@ def run_sweep(
         extra: ``key=value`` overrides of every cell, applied last (before the seed).
 
     Raises:
-        ConfigError, InputError: a bad sweep file or missing input, before any cell runs.
+        ConfigError, InputError: an unknown backend, a bad sweep file or missing input,
+            before any cell runs.
         KeyboardInterrupt: Ctrl-C, after the running cells saved their frames.
     """
-    if backend not in BACKENDS:
-        raise ConfigError(f"unknown backend {backend!r} (choose {' or '.join(BACKENDS)})")
+    run_cells: RunCells = SWEEP_BACKENDS.entry(backend).factory
     if jobs < 1:
         raise ConfigError(f"--jobs must be >= 1, got {jobs}")
     out = Path(out)
@@ -421,13 +431,7 @@ def run_sweep(
             report(outcome)
 
         try:
-            if backend == "ray":
-                _run_on_ray(pending, sweep, address, record)
-            elif jobs == 1:
-                for cell in pending:
-                    record(run_cell(cell))
-            else:
-                _run_in_processes(pending, jobs, record)
+            run_cells(pending, sweep, jobs, address, record)
         except KeyboardInterrupt:
             finished = sum(o.status in ("done", "skipped") for o in outcomes.values())
             raise KeyboardInterrupt(
@@ -473,6 +477,18 @@ def _stop_if_interrupted(outcome: CellOutcome) -> None:
         raise KeyboardInterrupt(f"interrupted: cell {outcome.cell} stopped (its frames saved)")
 
 
+def _run_locally(
+    cells: Sequence[Cell], sweep: SweepFile, jobs: int, address: str | None, record: Report
+) -> None:
+    """The ``local`` backend: cells one after another in this process (``jobs`` = 1), else
+    in ``jobs`` worker processes (``address`` is Ray's, unused)."""
+    if jobs == 1:
+        for cell in cells:
+            record(run_cell(cell))
+    else:
+        _run_in_processes(cells, jobs, record)
+
+
 def _run_in_processes(cells: Sequence[Cell], jobs: int, record: Report) -> None:
     """Cells in ``jobs`` spawned worker processes (each sets its own torch threads)."""
     import multiprocessing
@@ -516,9 +532,10 @@ def _ray_module():
 
 
 def _run_on_ray(
-    cells: Sequence[Cell], sweep: SweepFile, address: str | None, record: Report
+    cells: Sequence[Cell], sweep: SweepFile, jobs: int, address: str | None, record: Report
 ) -> None:
-    """Each cell a Ray task asking for the sweep's resources."""
+    """The ``ray`` backend: each cell a Ray task asking for the sweep's resources (Ray
+    schedules them; ``jobs`` is the local backend's, unused)."""
     ray = _ray_module()
     started = not ray.is_initialized()
     if started:
@@ -555,6 +572,10 @@ def _run_on_ray(
     finally:
         if started:
             ray.shutdown()
+
+
+SWEEP_BACKENDS.register("local", _run_locally)
+SWEEP_BACKENDS.register("ray", _run_on_ray)
 
 
 def _check_cluster(available: dict, sweep: SweepFile) -> None:

@@ -361,3 +361,18 @@ def test_shipped_ablations_are_the_papers_rows() -> None:
     assert [variant.paper for variant in sweep.variants] == ["full", *"abcdefgh"]
     iterations = load_sweep(REPO / "sweeps" / "iterations.yaml")
     assert [variant.paper for variant in iterations.variants] == ["full", "x2", "x10"]
+
+
+def test_sweep_backends_are_a_registry_the_cli_offers(tmp_path: Path) -> None:
+    """The backends by name: the CLI's --backend choices are the registry's names (the
+    CLI does not import the sweep module to build its parser); an unknown name is a
+    ConfigError naming the choices, before anything is written."""
+    from eslam.cli import sweep as sweep_command
+    from eslam.workflows.sweep import SWEEP_BACKENDS
+
+    assert SWEEP_BACKENDS.names() == ("local", "ray")
+    assert sweep_command.BACKENDS == SWEEP_BACKENDS.names()
+    sweep = load_sweep(write_sweep(tmp_path / "sweep.yaml", tmp_path))
+    with pytest.raises(ConfigError, match=r"unknown backend 'slurm' \(choose one of: local, ray\)"):
+        run_sweep(sweep, tmp_path / "out", backend="slurm", progress=False)
+    assert not (tmp_path / "out").exists()
