@@ -5,6 +5,7 @@ mesher use; :mod:`eslam.field.planes` holds the plane maths as pure functions.
 """
 
 from eslam.field.decoders import MLPDecoder, appearance_decoder, geometry_decoder
+from eslam.field.plane_sampling import sample_planes_fast, sample_planes_reference
 from eslam.field.planes import (
     PlaneLevel,
     PlaneSet,
@@ -12,8 +13,6 @@ from eslam.field.planes import (
     grid_size,
     normalize_points,
     plane_shapes,
-    sample_planes_fast,
-    sample_planes_reference,
 )
 from eslam.field.scene_field import SceneField
 

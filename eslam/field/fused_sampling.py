@@ -1,7 +1,7 @@
 """Every plane level of a field sampled in ONE autograd op (``plane_sampling: fused``).
 
 The same bilinear interpolation as the reference
-(:func:`eslam.field.planes.sample_planes_reference`: ``grid_sample`` with
+(:func:`eslam.field.plane_sampling.sample_planes_reference`: ``grid_sample`` with
 align_corners=True and border padding), computed as weighted sums
 of channel rows gathered from channels-last planes. For a plane of true size (h, w) and
 a point's plane coordinates (u, v) in a level's [-1, 1] (grid_sample's unnormalisation
@@ -293,7 +293,7 @@ def sample_levels_fused(
 
     Returns:
         One (N, C) tensor per level, equal to
-        :func:`~eslam.field.planes.sample_planes_reference` of the level's coordinates.
+        :func:`~eslam.field.plane_sampling.sample_planes_reference` of the level's coordinates.
     """
     windows = level_windows(planes, shapes, windows)
     layout = tuple(tuple(s) for s in shapes)

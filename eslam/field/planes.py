@@ -20,6 +20,9 @@ no gradient). Four samplings read the same parameters (``FieldConfig.plane_sampl
 * triton: the fused sampling's maths in Triton kernels, one launch per level, for CUDA
   (:mod:`eslam.field.triton_sampling`; channels-last planes too).
 
+Each is a sampler in :data:`eslam.field.plane_sampling.PLANE_SAMPLINGS` (with the
+per-level functions ``sample_planes_reference`` and ``sample_planes_fast``).
+
 tests/field/test_planes.py, test_fused_sampling.py and test_triton_sampling.py hold them
 equal.
 """
@@ -32,28 +35,20 @@ from dataclasses import dataclass
 from typing import Literal
 
 import torch
-import torch.nn.functional as F
 from torch import nn
 
-from eslam.field.fused_sampling import sample_levels_fused
-from eslam.field.triton_sampling import sample_levels_triton
-
-PlaneSampling = Literal["reference", "fast", "fused", "triton"]
-"""How plane features are interpolated (``FieldConfig.plane_sampling``; module doc)."""
-
-ROW_SAMPLINGS = ("fused", "triton")
-"""The samplings that read rows of C features from channels-last planes, all levels of a
-field in one op (:func:`fused_features`)."""
-
-PLANE_AXES: tuple[tuple[int, int], ...] = ((0, 1), (0, 2), (1, 2))
-"""Point coordinates (W axis, H axis) each plane of a level is sampled at: xy, xz, yz."""
+from eslam.field.plane_sampling import (
+    PLANE_AXES,
+    PLANE_SAMPLINGS,
+    PlaneSampler,
+    PlaneShapes,
+    grid_scale,
+    padding_mask,
+)
 
 ROUNDING_TOLERANCE = 1e-4
 """Slack (in cells) when dividing an extent by a cell size, so that 4.8 / 0.24 is 20
 cells and not 19 or 21 after float rounding; also makes :func:`fit_bound` idempotent."""
-
-PlaneShapes = tuple[tuple[int, int], ...]
-"""The true (height, width) of the xy, xz and yz planes of a level."""
 
 
 def fit_bound(bound: torch.Tensor, multiple: float) -> torch.Tensor:
@@ -150,134 +145,6 @@ def plane_shapes(grid: Sequence[int]) -> PlaneShapes:
     """The (height, width) of the xy, xz, yz planes for a grid of (nx, ny, nz) vertices."""
     nx, ny, nz = grid
     return (ny, nx), (nz, nx), (nz, ny)
-
-
-def _plane_coordinates(points_n: torch.Tensor) -> torch.Tensor:
-    """(3, N, 2) the (W, H) grid coordinates of each plane of a level."""
-    return torch.stack([points_n[:, axes] for axes in PLANE_AXES])
-
-
-def sample_planes_reference(
-    planes: torch.Tensor, shapes: PlaneShapes, points_n: torch.Tensor
-) -> torch.Tensor:
-    """Sum of the bilinear features of a level's three planes: one grid_sample per plane.
-
-    The slow, readable reference of :func:`sample_planes_fast` (release semantics):
-    bilinear, align_corners=True (p_n = -1 and +1 are the first and last vertex), border
-    padding (points outside the bound read the border).
-
-    Args:
-        planes: (3, C, Hmax, Wmax) a level's padded planes; plane i is
-            ``planes[i, :, :h_i, :w_i]``.
-        shapes: the true (h_i, w_i) of the three planes.
-        points_n: (N, 3) normalised coordinates.
-
-    Returns:
-        (N, C) the feature sum f_xy(x, y) + f_xz(x, z) + f_yz(y, z).
-    """
-    coords = _finite(_plane_coordinates(points_n))
-    total = None
-    for i, (h, w) in enumerate(shapes):
-        plane = planes[i, :, :h, :w].unsqueeze(0)
-        sampled = F.grid_sample(
-            plane,
-            coords[i].view(1, 1, -1, 2).to(plane.dtype),
-            mode="bilinear",
-            padding_mode="border",
-            align_corners=True,
-        )
-        feature = sampled[0, :, 0, :].transpose(0, 1)
-        total = feature if total is None else total + feature
-    return total
-
-
-class _MaskGradient(torch.autograd.Function):
-    """Identity whose backward zeroes the gradient where ``padding`` is True."""
-
-    @staticmethod
-    def forward(ctx, tensor: torch.Tensor, padding: torch.Tensor) -> torch.Tensor:
-        ctx.save_for_backward(padding)
-        return tensor.view_as(tensor)
-
-    @staticmethod
-    def backward(ctx, grad: torch.Tensor) -> tuple[torch.Tensor, None]:
-        (padding,) = ctx.saved_tensors
-        return grad.masked_fill(padding, 0), None
-
-
-def _finite(coords: torch.Tensor) -> torch.Tensor:
-    """NaN coordinates (a caller's bug) read the lower border: grid_sample on the CPU
-    turns NaN into a memory index and crashes the process (a segfault) instead."""
-    return torch.nan_to_num(coords, nan=-1.0)
-
-
-def _clamp_border(coords: torch.Tensor) -> torch.Tensor:
-    """Clamp to [-1, 1] with the gradient of grid_sample's border padding.
-
-    grid_sample counts a coordinate ON the border as outside (zero gradient), while
-    ``torch.clamp`` passes the gradient there; this matches grid_sample exactly.
-    """
-    inside = (coords > -1) & (coords < 1)
-    return torch.where(inside, coords, coords.detach().clamp(-1.0, 1.0))
-
-
-def padding_mask(shapes: PlaneShapes, height: int, width: int, device=None) -> torch.Tensor:
-    """(3, 1, Hmax, Wmax) bool, True on the padding beyond each plane's true extent."""
-    mask = torch.ones(3, 1, height, width, dtype=torch.bool, device=device)
-    for i, (h, w) in enumerate(shapes):
-        mask[i, :, :h, :w] = False
-    return mask
-
-
-def grid_scale(shapes: PlaneShapes, height: int, width: int, device=None) -> torch.Tensor:
-    """(3, 1, 2) per plane ((w - 1) / (Wmax - 1), (h - 1) / (Hmax - 1)), float64.
-
-    The factor that shrinks a plane's [-1, 1] onto its true extent inside the padded
-    (Hmax, Wmax) tensor; 1 where the padded size is 1 (then the plane's size is 1 too).
-    """
-    rows = [
-        [(w - 1) / (width - 1) if width > 1 else 1.0, (h - 1) / (height - 1) if height > 1 else 1.0]
-        for h, w in shapes
-    ]
-    return torch.tensor(rows, dtype=torch.float64, device=device).view(3, 1, 2)
-
-
-def sample_planes_fast(
-    planes: torch.Tensor,
-    shapes: PlaneShapes,
-    points_n: torch.Tensor,
-    padding: torch.Tensor | None = None,
-    scale: torch.Tensor | None = None,
-) -> torch.Tensor:
-    """:func:`sample_planes_reference` in ONE batched grid_sample call (batch = 3 planes).
-
-    Border padding with align_corners=True is a clamp of the coordinates to [-1, 1];
-    then each plane's [-1, 1] is rescaled onto its true extent inside the padded tensor:
-    g' = (g + 1) (w - 1) / (Wmax - 1) - 1, and the same along the height.
-
-    Args:
-        planes: (3, C, Hmax, Wmax) a level's padded planes.
-        shapes: the true (h_i, w_i) of the three planes.
-        points_n: (N, 3) normalised coordinates.
-        padding: optional (3, 1, Hmax, Wmax) bool from :func:`padding_mask`; its entries
-            get exactly zero gradient (without it, float rounding at the upper border can
-            leak a ~1e-7 share of the gradient into the padding).
-        scale: optional (3, 1, 2) from :func:`grid_scale` (computed when None).
-
-    Returns:
-        (N, C) the feature sum of the three planes.
-    """
-    if padding is not None and planes.requires_grad:
-        planes = _MaskGradient.apply(planes, padding)
-    if scale is None:
-        scale = grid_scale(shapes, planes.shape[2], planes.shape[3], planes.device)
-    scale = scale.to(planes.dtype)
-    coords = _clamp_border(_finite(_plane_coordinates(points_n).to(planes.dtype)))
-    grid = (coords + 1.0) * scale - 1.0
-    sampled = F.grid_sample(
-        planes, grid.unsqueeze(1), mode="bilinear", padding_mode="border", align_corners=True
-    )
-    return sampled.sum(dim=0)[:, 0, :].transpose(0, 1)
 
 
 IDENTITY_WINDOW = ((-1.0, 1.0), (-1.0, 1.0), (-1.0, 1.0))
@@ -395,7 +262,7 @@ class PlaneLevel(nn.Module):
         grid: Sequence[int],
         channels: int,
         init_std: float,
-        sampling: PlaneSampling = "fast",
+        sampling: str = "fast",
         generator: torch.Generator | None = None,
     ):
         """Planes for a grid of (nx, ny, nz) vertices with ``channels`` features each.
@@ -404,10 +271,7 @@ class PlaneLevel(nn.Module):
         None: torch's global one).
         """
         super().__init__()
-        if sampling not in ("reference", "fast", "fused", "triton"):
-            raise ValueError(
-                f"plane sampling must be reference, fast, fused or triton, got {sampling!r}"
-            )
+        self.sampler: PlaneSampler = PLANE_SAMPLINGS.make(sampling)
         self.sampling = sampling
         self.init_std = float(init_std)
         grid = tuple(int(n) for n in grid)
@@ -425,7 +289,7 @@ class PlaneLevel(nn.Module):
         self.shapes = plane_shapes(grid)
         height, width = planes.shape[2], planes.shape[3]
         device = planes.device
-        if self.sampling in ROW_SAMPLINGS:  # rows of C features contiguous: read them whole
+        if self.sampler.rows:  # rows of C features contiguous: read them whole
             planes = planes.contiguous(memory_format=torch.channels_last)
         self.planes = nn.Parameter(planes)
         self.vertices = torch.tensor(grid, dtype=torch.int64, device=self.vertices.device)
@@ -486,12 +350,7 @@ class PlaneLevel(nn.Module):
 
     def sample(self, points_n: torch.Tensor) -> torch.Tensor:
         """(N, 3) normalised points -> (N, C) sum of the three planes' bilinear features."""
-        if self.sampling in ROW_SAMPLINGS:
-            return sample_levels_at_once([self], points_n)[0]
-        points_n = self.coordinates(points_n)
-        if self.sampling == "fast":
-            return sample_planes_fast(self.planes, self.shapes, points_n, self.padding, self.scale)
-        return sample_planes_reference(self.planes, self.shapes, points_n)
+        return self.sampler.level(self, points_n)
 
     def extra_repr(self) -> str:
         return f"grid={self.grid}, channels={self.channels}, sampling={self.sampling}"
@@ -516,7 +375,7 @@ class PlaneSet(nn.Module):
         init_std: float,
         levels: Literal["both", "coarse", "fine"] = "both",
         fusion: Literal["concat", "sum"] = "concat",
-        sampling: PlaneSampling = "fast",
+        sampling: str = "fast",
         generator: torch.Generator | None = None,
     ):
         """Planes over the fitted (3, 2) ``bound`` with (coarse, fine) cell sizes in metres.
@@ -569,21 +428,14 @@ class PlaneSet(nn.Module):
 def sample_levels_at_once(
     levels: Sequence[PlaneLevel], points_n: torch.Tensor
 ) -> tuple[torch.Tensor, ...]:
-    """Each level's (N, C) features from ONE op over all of them: the ``fused`` op
-    (:func:`~eslam.field.fused_sampling.sample_levels_fused`) or the ``triton`` one
-    (:func:`~eslam.field.triton_sampling.sample_levels_triton`), as the levels' sampling
-    says (one sampling per field)."""
-    planes = [level.planes for level in levels]
-    shapes = [level.shapes for level in levels]
-    if levels[0].sampling == "triton":  # the window buffers, read on the device
-        windows = [None if level._identity else level.window for level in levels]
-        return sample_levels_triton(points_n, planes, shapes, windows)
-    return sample_levels_fused(points_n, planes, shapes, [level._window_bounds for level in levels])
+    """Each level's (N, C) features from ONE op over all of them, by the levels' sampler
+    (a row sampler's: ``fused`` or ``triton``; one sampling per field)."""
+    return levels[0].sampler.levels(levels, points_n)
 
 
 def fused_features(sets: Sequence[PlaneSet], points_n: torch.Tensor) -> list[torch.Tensor]:
     """Each plane set's (N, out_dim) features, every level of every set sampled in ONE
-    op (:func:`sample_levels_at_once`: the ``fused`` or ``triton`` sampling).
+    op (:func:`sample_levels_at_once`: a row sampler, ``fused`` or ``triton``).
 
     Equal to ``[s.features(points_n) for s in sets]``.
     """

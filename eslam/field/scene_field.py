@@ -14,8 +14,8 @@ from torch import nn
 
 from eslam.config import FieldConfig
 from eslam.field.decoders import appearance_decoder, geometry_decoder
+from eslam.field.plane_sampling import PLANE_SAMPLINGS
 from eslam.field.planes import (
-    ROW_SAMPLINGS,
     PlaneLevel,
     PlaneSet,
     enclosing_bound,
@@ -169,7 +169,7 @@ class SceneField(nn.Module):
         sampled in one op.
         """
         colour_set = self.appearance if with_colour else None
-        if self.config.plane_sampling in ROW_SAMPLINGS:
+        if PLANE_SAMPLINGS.make(self.config.plane_sampling).rows:
             sets = [self.geometry] if colour_set is None else [self.geometry, colour_set]
             features = fused_features(sets, points_n)
             geometry = features[0]

@@ -2,7 +2,7 @@
 
 The same maths as :mod:`eslam.field.fused_sampling` (its docstring and
 :func:`~eslam.field.fused_sampling.bilinear_corners`), which equals the reference
-:func:`eslam.field.planes.sample_planes_reference` (``grid_sample``, align_corners=True,
+:func:`eslam.field.plane_sampling.sample_planes_reference` (``grid_sample``, align_corners=True,
 border padding). Per level, with window (lo, hi) per axis (none: q = p),
 
     q = 2 (p - lo) / (hi - lo) - 1                    (NaN -> -1, as the reference)
@@ -304,7 +304,7 @@ def sample_levels_triton(
 
     Returns:
         One (N, C) tensor per level, equal to
-        :func:`~eslam.field.planes.sample_planes_reference` of the level's coordinates.
+        :func:`~eslam.field.plane_sampling.sample_planes_reference` of the level's coordinates.
 
     Raises:
         RuntimeError: triton or torch.library.custom_op missing (the message names the

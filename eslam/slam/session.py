@@ -33,7 +33,7 @@ from eslam.data.realtime import replay_pace_error, timestamps_are_frame_numbers
 from eslam.data.selection import sequence_timestamps
 from eslam.data.source import FrameSource, SequenceSource, source_length
 from eslam.errors import ConfigError, ESLAMError, InputError, RunInterrupted
-from eslam.field.triton_sampling import check_device
+from eslam.field.plane_sampling import PLANE_SAMPLINGS
 from eslam.slam.context import RunContext
 from eslam.slam.loop import RunLoop
 from eslam.slam.mapping.backend import BackEnd, make_back_end
@@ -96,7 +96,7 @@ def resolve_config(config: ESLAMConfig) -> ESLAMConfig:
     Raises:
         ConfigError: ``field.plane_sampling`` cannot run on the configured device.
     """
-    check_device(config.field.plane_sampling, resolve_device(config.device))
+    PLANE_SAMPLINGS.check(config.field.plane_sampling, resolve_device(config.device))
     config = absolute_data_path(config)
     return dataclasses.replace(config, data=with_detected_format(config.data))
 

@@ -22,8 +22,8 @@ import torch
 
 from eslam.config import ESLAMConfig
 from eslam.errors import InputError
+from eslam.field.plane_sampling import PLANE_SAMPLINGS
 from eslam.field.scene_field import SceneField
-from eslam.field.triton_sampling import check_device
 from eslam.io.checkpoint import load_checkpoint, save_checkpoint
 from eslam.mesh.observed import ObservedViews
 from eslam.slam.mapping.keyframes import KeyframeStore, WindowStrategy, make_window_strategy
@@ -242,7 +242,7 @@ def load_state(path: Path, config: ESLAMConfig, device: torch.device) -> SLAMSta
         ConfigError: ``field.plane_sampling: triton`` on a device it cannot run on.
         InputError: a map written by another configuration or format version.
     """
-    check_device(config.field.plane_sampling, device)
+    PLANE_SAMPLINGS.check(config.field.plane_sampling, device)
     saved = load_checkpoint(path, map_location="cpu")
     try:
         field_ = None

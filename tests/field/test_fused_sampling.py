@@ -10,7 +10,8 @@ import torch
 
 from eslam.config import FieldConfig
 from eslam.field.fused_sampling import FusedPlaneSampling, sample_levels_fused
-from eslam.field.planes import plane_shapes, sample_planes_reference
+from eslam.field.plane_sampling import sample_planes_reference
+from eslam.field.planes import plane_shapes
 from eslam.field.scene_field import SceneField
 
 SMALL = FieldConfig(

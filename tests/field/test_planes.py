@@ -5,16 +5,14 @@ from __future__ import annotations
 import pytest
 import torch
 
+from eslam.field.plane_sampling import padding_mask, sample_planes_fast, sample_planes_reference
 from eslam.field.planes import (
     PlaneLevel,
     PlaneSet,
     fit_bound,
     grid_size,
     normalize_points,
-    padding_mask,
     plane_shapes,
-    sample_planes_fast,
-    sample_planes_reference,
 )
 
 ODD_GRIDS = [(7, 5, 3), (3, 7, 5), (5, 3, 7), (2, 2, 9), (1, 4, 6), (6, 6, 6)]

@@ -20,7 +20,8 @@ pytest.importorskip("triton", reason="plane_sampling: triton needs the triton pa
 from eslam.config import ESLAMConfig, FieldConfig
 from eslam.errors import ConfigError
 from eslam.field import triton_sampling
-from eslam.field.planes import plane_shapes, sample_planes_reference, to_window
+from eslam.field.plane_sampling import sample_planes_reference
+from eslam.field.planes import plane_shapes, to_window
 from eslam.field.scene_field import SceneField
 from eslam.field.triton_sampling import check_device, sample_levels_triton
 from eslam.slam.session import run_slam

@@ -11,8 +11,9 @@ from pathlib import Path
 import pytest
 import torch
 
-from eslam.config import MappingConfig, TrackingConfig
+from eslam.config import FieldConfig, MappingConfig, TrackingConfig
 from eslam.errors import ConfigError
+from eslam.field.plane_sampling import PLANE_SAMPLINGS
 from eslam.io.checkpoint import load_checkpoint
 from eslam.registry import Registry
 from eslam.slam.mapping.backend import BACK_ENDS, KeyframeBackEnd
@@ -35,6 +36,7 @@ def _literal(config: type, key: str) -> set[str]:
         (TRACKERS, TrackingConfig, "method"),
         (WINDOWS, MappingConfig, "selection"),
         (BACK_ENDS, MappingConfig, "back_end"),
+        (PLANE_SAMPLINGS, FieldConfig, "plane_sampling"),
     ],
 )
 def test_each_config_name_is_a_registry_entry(registry: Registry, config: type, key: str) -> None:
@@ -51,6 +53,13 @@ def test_a_registry_names_its_choices_and_refuses_a_taken_name() -> None:
         registry.register("one", lambda: 2)
     registry.unregister("one")
     assert registry.names() == ()
+
+
+def test_the_triton_sampling_refuses_a_device_it_cannot_run_on() -> None:
+    for name in ("reference", "fast", "fused"):
+        PLANE_SAMPLINGS.check(name, torch.device("cpu"))  # run anywhere
+    with pytest.raises(ConfigError, match="plane_sampling: triton"):
+        PLANE_SAMPLINGS.check("triton", torch.device("mps"))
 
 
 def test_a_device_check_refuses_before_anything_is_built() -> None:
