@@ -90,13 +90,9 @@ class Components:
 
 
 def resolve_config(config: ESLAMConfig) -> ESLAMConfig:
-    """``config`` as a run uses it: ``data.path`` absolute, ``data.format`` detected
-    (a bag's); the device's support for the plane-sampling backend checked.
-
-    Raises:
-        ConfigError: ``field.plane_sampling`` cannot run on the configured device.
-    """
-    PLANE_SAMPLINGS.check(config.field.plane_sampling, resolve_device(config.device))
+    """``config`` as a run saves it: ``data.path`` absolute, ``data.format`` detected (a
+    bag's). The sweep resolves its cells' configs with it, so a finished cell's
+    config.yaml compares equal to the cell's."""
     config = absolute_data_path(config)
     return dataclasses.replace(config, data=with_detected_format(config.data))
 
@@ -238,6 +234,7 @@ def run_slam(
     """
     config = resolve_config(config)
     device = resolve_device(config.device)
+    PLANE_SAMPLINGS.check(config.field.plane_sampling, device)
     if resume:
         check_resumable(config, source, Path(run_dir))
     source, sequence = _open_input(config, source)

@@ -43,8 +43,7 @@ from eslam.config.packaged import find_config
 from eslam.errors import ConfigError, ESLAMError, InputError
 from eslam.io.run_dir import RunDirectory, json_text, write_json
 from eslam.registry import Registry
-from eslam.slam.run.folder import absolute_data_path
-from eslam.slam.session import run_slam
+from eslam.slam.session import resolve_config, run_slam
 from eslam.synthetic import read_synthetic_bound
 from eslam.workflows.evaluate_run import EvaluationOptions, evaluate_run
 from eslam.workflows.sweep_file import SweepDataset, SweepFile, SweepVariant
@@ -225,7 +224,7 @@ def _cell_config(
         f"seed={seed}",
     ]
     try:
-        return absolute_data_path(load_config(config_file, overrides))
+        return resolve_config(load_config(config_file, overrides))
     except ConfigError as error:
         raise ConfigError(
             f"{sweep.path}: dataset {dataset.name!r}, variant {variant.name!r}: {error}"
