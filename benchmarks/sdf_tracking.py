@@ -11,7 +11,7 @@ on real data drifts from the ground truth by the run's ATE (a centimetre or more
 pyramid it reports the median and maximum wall time per frame, the mean translation
 error against the reference, the mean iterations, and the smallest eigenvalue of the
 normalised information at the reference poses (minimum and median over the frames;
-:func:`eslam.slam.tracking.sdf.normalised_information`: near 0 means a degenerate view,
+:func:`eslam.slam.tracking.sdf_system.normalised_information`: near 0 means a degenerate view,
 e.g. one plane; ``tracking.sdf.degeneracy`` holds the directions below its threshold).
 With ``--colour-weights`` each pyramid is measured once per weight of the colour term
 (``tracking.sdf.colour_weight``), and the table also gives the mean rotation error.
@@ -49,7 +49,8 @@ from eslam.geometry.pose import pose_distance
 from eslam.io.checkpoint import load_checkpoint
 from eslam.io.trajectory import read_trajectory
 from eslam.render.rays import camera_directions
-from eslam.slam.tracking.sdf import SdfTracker, linearise, normalised_information, sdf_points
+from eslam.slam.tracking.sdf import SdfTracker, sdf_points
+from eslam.slam.tracking.sdf_system import linearise, normalised_information
 from eslam.slam.views import make_view
 
 

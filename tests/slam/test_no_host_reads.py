@@ -20,7 +20,8 @@ from eslam.slam.tracking.render import (
     pose_optimiser,
     tracking_step,
 )
-from eslam.slam.tracking.sdf import Solver, linearise, lm_step, sdf_points, track_sdf
+from eslam.slam.tracking.sdf import Solver, lm_step, sdf_points, track_sdf
+from eslam.slam.tracking.sdf_system import linearise
 from eslam.slam.views import make_view
 from eslam.types import Intrinsics
 from tests.slam.test_sdf_tracking import CAMERA as SDF_CAMERA

@@ -17,13 +17,12 @@ from eslam.field.scene_field import SceneField
 from eslam.geometry.pose import pose_distance, se3_exp
 from eslam.losses import depth_noise_scale
 from eslam.render.rays import camera_directions
-from eslam.slam.tracking.sdf import (
-    SdfTracker,
+from eslam.slam.tracking.sdf import SdfTracker, sdf_points
+from eslam.slam.tracking.sdf_system import (
     constrained_directions,
     field_derivatives,
     linearise,
     robust_weights,
-    sdf_points,
     twist_jacobian,
 )
 from eslam.slam.views import make_view

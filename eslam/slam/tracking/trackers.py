@@ -17,13 +17,14 @@ from eslam.geometry.pose import extrapolate_constant_velocity
 from eslam.registry import Registry
 from eslam.slam.cuda_graphs import GraphedRenderTracker
 from eslam.slam.tracking.base import Tracker
+from eslam.slam.tracking.hybrid import HybridTracker
 from eslam.slam.tracking.render import (
     RenderTracker,
     TrackingSettings,
     compiled_tracking_loss,
     tracking_loss,
 )
-from eslam.slam.tracking.sdf import HybridTracker, SdfTracker
+from eslam.slam.tracking.sdf import SdfTracker
 
 
 def _renderer(config: ESLAMConfig, settings: TrackingSettings) -> RenderTracker:
