@@ -62,8 +62,9 @@ from eslam.field.scene_field import SceneField
 from eslam.field.triton_sampling import check_device as check_sampling_device
 from eslam.geometry.pose import quaternion_to_matrix
 from eslam.render.rays import camera_directions
-from eslam.slam.mapping.keyframes import KeyframeStore, make_window_strategy
+from eslam.slam.mapping.keyframes import KeyframeStore
 from eslam.slam.mapping.mapper import MappingSettings, WindowPoses, mapping_optimiser, mapping_step
+from eslam.slam.mapping.windows import make_window_strategy
 from eslam.slam.tracking.render import (
     PoseVariables,
     TrackingSettings,

@@ -26,7 +26,8 @@ from eslam.field.plane_sampling import PLANE_SAMPLINGS
 from eslam.field.scene_field import SceneField
 from eslam.io.checkpoint import load_checkpoint, save_checkpoint
 from eslam.mesh.observed import ObservedViews
-from eslam.slam.mapping.keyframes import KeyframeStore, WindowStrategy, make_window_strategy
+from eslam.slam.mapping.keyframes import KeyframeStore
+from eslam.slam.mapping.windows import WindowStrategy, make_window_strategy
 from eslam.slam.tracking.base import TrackingQuality
 from eslam.slam.trajectory import Trajectory
 from eslam.types import Intrinsics

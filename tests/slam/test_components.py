@@ -17,7 +17,7 @@ from eslam.field.plane_sampling import PLANE_SAMPLINGS
 from eslam.io.checkpoint import load_checkpoint
 from eslam.registry import Registry
 from eslam.slam.mapping.backend import BACK_ENDS, KeyframeBackEnd
-from eslam.slam.mapping.keyframes import WINDOWS
+from eslam.slam.mapping.windows import WINDOWS
 from eslam.slam.session import Components, run_slam
 from eslam.slam.tracking.frontend import TrackingFrontEnd
 from eslam.slam.tracking.trackers import TRACKERS

@@ -10,9 +10,8 @@ import torch
 
 from eslam.config import MappingConfig
 from eslam.io.checkpoint import load_checkpoint, save_checkpoint
-from eslam.slam.mapping.keyframes import (
-    DEPTH_UNITS_PER_METRE,
-    KeyframeStore,
+from eslam.slam.mapping.keyframes import DEPTH_UNITS_PER_METRE, KeyframeStore
+from eslam.slam.mapping.windows import (
     OverlapWindow,
     RandomWindow,
     RecentWindow,
