@@ -58,7 +58,8 @@ def add(commands: argparse._SubParsersAction) -> None:
 def handle_sweep(args: argparse.Namespace) -> int:
     """Run the sweep (or, with --dry-run, print its cells); exit status 1 when a cell
     failed."""
-    from eslam.workflows.sweep import check_inputs, describe_cells, plan_cells, run_sweep
+    from eslam.workflows.sweep import run_sweep
+    from eslam.workflows.sweep_cells import check_inputs, describe_cells, plan_cells
     from eslam.workflows.sweep_file import load_sweep
 
     names = [[n for n in (text or "").split(",") if n] for text in (args.datasets, args.variants)]

@@ -1,6 +1,7 @@
 """`eslam sweep SWEEP.yaml --out DIR`: every cell of a sweep file run and evaluated.
 
-A cell is one (dataset, variant, seed) of the grid (:mod:`eslam.workflows.sweep_file`):
+A cell is one (dataset, variant, seed) of the grid (:mod:`eslam.workflows.sweep_file`;
+planned, checked and its status kept by :mod:`eslam.workflows.sweep_cells`):
 its run folder ``DIR/<dataset>/<variant>/seed<k>/`` holds the usual run outputs
 (config.yaml fully resolved, trajectory, metrics.json ...), the evaluation of
 ``eslam eval`` (metrics.json's ATE and, with a ground-truth mesh, the mesh metrics;
@@ -31,56 +32,31 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
-import json
 import time
 import traceback
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from eslam.config import ESLAMConfig, load_config
-from eslam.config.packaged import find_config
-from eslam.errors import ConfigError, ESLAMError, InputError
-from eslam.io.run_dir import RunDirectory, json_text, write_json
+from eslam.errors import ConfigError, ESLAMError
+from eslam.io.run_dir import RunDirectory, write_json
 from eslam.registry import Registry
-from eslam.slam.session import resolve_config, run_slam
-from eslam.synthetic import read_synthetic_bound
-from eslam.workflows.evaluate_run import EvaluationOptions, evaluate_run
-from eslam.workflows.sweep_file import SweepDataset, SweepFile, SweepVariant
-
-CELL_FILE = "cell.json"
-"""The status file of a cell (module docstring)."""
-SWEEP_FILE = "sweep.json"
-"""DIR/sweep.json: the grid of the last sweep into DIR (dataset, variant order for tables)."""
-SYNTHETIC_MARKER = "synth.json"
-"""A sequence folder holding it is a synthetic scene: its cells get its exact bound."""
-
-
-@dataclass(frozen=True)
-class Cell:
-    """One run of a sweep.
-
-    Attributes:
-        dataset, variant, seed: where in the grid.
-        config: the resolved configuration (``data.path`` absolute).
-        run_dir: ``OUT/<dataset>/<variant>/seed<seed>``.
-        evaluation: how the finished run is scored.
-        paper_scene, paper_experiment: what of the paper it repeats (or None).
-    """
-
-    dataset: str
-    variant: str
-    seed: int
-    config: ESLAMConfig
-    run_dir: Path
-    evaluation: EvaluationOptions
-    paper_scene: str | None = None
-    paper_experiment: str | None = None
-
-    @property
-    def name(self) -> str:
-        """``dataset/variant/seed<k>``, the cell's folder under the sweep's output."""
-        return f"{self.dataset}/{self.variant}/seed{self.seed}"
+from eslam.slam.session import run_slam
+from eslam.workflows.evaluate_run import evaluate_run
+from eslam.workflows.sweep_cells import (
+    CELL_FILE,
+    SWEEP_FILE,
+    Cell,
+    check_inputs,
+    evaluation_settings,
+    is_finished,
+    plan_cells,
+    read_status,
+    run_finished,
+    same_config,
+    write_status,
+)
+from eslam.workflows.sweep_file import SweepFile
 
 
 @dataclass(frozen=True)
@@ -128,178 +104,6 @@ class SweepSummary:
         return line
 
 
-def plan_cells(sweep: SweepFile, out: str | Path, extra: Sequence[str] = ()) -> list[Cell]:
-    """Every cell of ``sweep`` (``SweepFile.select`` picks datasets and variants), with
-    its resolved configuration, in grid order (dataset, variant, seed); ``extra``
-    overrides every cell last (``eslam sweep SWEEP key=value``, e.g. ``device=cuda``).
-
-    Override order: ``threads`` (= resources.cpus), ``output.progress=false`` (the sweep
-    draws one bar over cells), ``data.path``, the synthetic bound (module
-    SYNTHETIC_MARKER), the sweep's overrides, the dataset's, the variant's, the
-    dataset's for the variant (``variant_overrides``), ``extra``, ``seed``.
-
-    Raises:
-        ConfigError: a missing config, an invalid
-            override or evaluation setting; the message names the sweep file and cell.
-    """
-    cells = []
-    for dataset in sweep.datasets:
-        evaluation = _evaluation_options(sweep, dataset)
-        data = sweep.resolve(dataset.data, f"{dataset.name}.data").absolute()
-        gt_mesh = (
-            None
-            if dataset.gt_mesh is None
-            else sweep.resolve(dataset.gt_mesh, "gt_mesh").absolute()
-        )
-        for variant in sweep.variants:
-            first = _cell_config(sweep, (dataset, variant), data, sweep.seeds[0], extra)
-            for seed in sweep.seeds:
-                config = dataclasses.replace(first, seed=seed)  # seed is the last override
-                if gt_mesh is not None and not config.output.mesh:
-                    raise ConfigError(
-                        f"{sweep.path}: dataset {dataset.name!r} has a gt_mesh but variant "
-                        f"{variant.name!r} sets output.mesh=false (no mesh to score): drop "
-                        "one of them"
-                    )
-                cells.append(
-                    Cell(
-                        dataset.name,
-                        variant.name,
-                        seed,
-                        config,
-                        Path(out) / dataset.name / variant.name / f"seed{seed}",
-                        dataclasses.replace(evaluation, gt_mesh=gt_mesh, device=config.device),
-                        dataset.paper,
-                        variant.paper,
-                    )
-                )
-    return cells
-
-
-def _evaluation_options(sweep: SweepFile, dataset: SweepDataset) -> EvaluationOptions:
-    """The sweep's evaluation settings with the dataset's over them."""
-    try:
-        return EvaluationOptions(**{**dict(sweep.evaluation), **dict(dataset.evaluation)})
-    except (ConfigError, TypeError) as error:
-        raise ConfigError(f"{sweep.path}: evaluation of {dataset.name!r}: {error}") from None
-
-
-def _config_file(sweep: SweepFile, text: str, key: str) -> Path:
-    """A config's file: a path relative to the sweep file, else a packaged config."""
-    path = sweep.resolve(text, key)
-    if path.is_file():
-        return path
-    try:
-        return find_config(text)
-    except ConfigError:
-        raise ConfigError(
-            f"{sweep.path}: {key}: {text} is neither a file next to the sweep file nor a "
-            "packaged config (`eslam configs` lists them)"
-        ) from None
-
-
-def _cell_config(
-    sweep: SweepFile,
-    where: tuple[SweepDataset, SweepVariant],
-    data: Path,
-    seed: int,
-    extra: Sequence[str],
-) -> ESLAMConfig:
-    dataset, variant = where
-    key = "base" if dataset.config is None else f"{dataset.name}.config"
-    config_file = _config_file(sweep, dataset.config or sweep.base, key)
-    bound = []
-    if (data / SYNTHETIC_MARKER).is_file():
-        bound = [f"scene.bound={read_synthetic_bound(data)}"]
-    overrides = [
-        f"threads={sweep.resources.cpus}",
-        "output.progress=false",
-        f"data.path={data}",
-        *bound,
-        *sweep.overrides,
-        *dataset.overrides,
-        *variant.overrides,
-        *dataset.overrides_of(variant.name),
-        *extra,
-        f"seed={seed}",
-    ]
-    try:
-        return resolve_config(load_config(config_file, overrides))
-    except ConfigError as error:
-        raise ConfigError(
-            f"{sweep.path}: dataset {dataset.name!r}, variant {variant.name!r}: {error}"
-        ) from None
-
-
-def check_inputs(cells: Sequence[Cell]) -> None:
-    """Refuse a sweep whose sequences or ground-truth meshes are missing, before any run.
-
-    Raises:
-        InputError: the first missing folder or file, named.
-    """
-    for path in dict.fromkeys(Path(str(cell.config.data.path)) for cell in cells):
-        if not path.is_dir():
-            raise InputError(
-                path,
-                "sequence folder not found",
-                "fix the dataset's data in the sweep file, or the ${VARIABLE} it uses",
-            )
-    for mesh in dict.fromkeys(cell.evaluation.gt_mesh for cell in cells):
-        if mesh is not None and not mesh.is_file():
-            raise InputError(mesh, "ground-truth mesh not found", "fix the dataset's gt_mesh")
-
-
-def is_finished(cell: Cell) -> bool:
-    """True when the cell's folder holds its finished run of the same config, evaluated
-    with the same settings."""
-    return _run_finished(cell) and _read_status(cell.run_dir).get("evaluation") == _evaluation(cell)
-
-
-def _run_finished(cell: Cell) -> bool:
-    """True when the cell's run (not necessarily its evaluation) finished with its config."""
-    run = RunDirectory(cell.run_dir)
-    status = _read_status(cell.run_dir)
-    if status.get("run") != "done" or not run.metrics.is_file():
-        return False
-    return _same_config(run, cell.config)
-
-
-def _evaluation(cell: Cell) -> dict:
-    """The cell's evaluation settings as cell.json records them."""
-    return json.loads(json_text(dataclasses.asdict(cell.evaluation)))
-
-
-def _same_config(run: RunDirectory, config: ESLAMConfig) -> bool:
-    if not run.config.is_file():
-        return False
-    try:
-        return load_config(run.config) == config
-    except ESLAMError:
-        return False
-
-
-def _read_status(run_dir: Path) -> dict:
-    try:
-        status = json.loads((run_dir / CELL_FILE).read_text(encoding="utf-8"))
-    except (OSError, ValueError):
-        return {}
-    return status if isinstance(status, dict) else {}
-
-
-def _write_status(cell: Cell, status: str, **more: object) -> None:
-    record = {
-        "status": status,
-        "dataset": cell.dataset,
-        "variant": cell.variant,
-        "seed": cell.seed,
-        "paper_scene": cell.paper_scene,
-        "paper_experiment": cell.paper_experiment,
-        "error": None,
-        **more,
-    }
-    write_json(cell.run_dir / CELL_FILE, record)
-
-
 @contextlib.contextmanager
 def cell_threads(threads: int) -> Iterator[None]:
     """torch's CPU threads set to ``threads`` (0 = unchanged) inside, restored after."""
@@ -333,30 +137,30 @@ def run_cell(cell: Cell) -> CellOutcome:
         return CellOutcome(cell.name, "skipped")
     started = time.monotonic()
     run = RunDirectory(cell.run_dir)
-    ran = _run_finished(cell)  # only the evaluation settings changed: evaluate again
-    resume = not ran and run.map.is_file() and _same_config(run, cell.config)
+    ran = run_finished(cell)  # only the evaluation settings changed: evaluate again
+    resume = not ran and run.map.is_file() and same_config(run, cell.config)
     cell.run_dir.mkdir(parents=True, exist_ok=True)
-    _write_status(cell, "running", run="done" if ran else None)
+    write_status(cell, "running", run="done" if ran else None)
     try:
         with cell_threads(cell.config.threads):
             if not ran:
                 run_slam(cell.config, cell.run_dir, resume=resume, overwrite=not resume)
-                _write_status(cell, "running", run="done")
+                write_status(cell, "running", run="done")
             evaluate_run(cell.run_dir, cell.evaluation)
     except KeyboardInterrupt:
-        run_state = _read_status(cell.run_dir).get("run")
-        _write_status(cell, "interrupted", run=run_state, seconds=time.monotonic() - started)
+        run_state = read_status(cell.run_dir).get("run")
+        write_status(cell, "interrupted", run=run_state, seconds=time.monotonic() - started)
         raise
     except Exception as error:
         seconds = time.monotonic() - started
         trace = None if isinstance(error, ESLAMError) else traceback.format_exc()
-        run_state = _read_status(cell.run_dir).get("run")
-        _write_status(
+        run_state = read_status(cell.run_dir).get("run")
+        write_status(
             cell, "failed", run=run_state, error=one_line(error), traceback=trace, seconds=seconds
         )
         return CellOutcome(cell.name, "failed", one_line(error), seconds)
     seconds = time.monotonic() - started
-    _write_status(cell, "done", run="done", evaluation=_evaluation(cell), seconds=seconds)
+    write_status(cell, "done", run="done", evaluation=evaluation_settings(cell), seconds=seconds)
     return CellOutcome(cell.name, "done", None, seconds)
 
 
@@ -516,7 +320,7 @@ def _run_in_processes(cells: Sequence[Cell], jobs: int, record: Report) -> None:
 def worker_lost(cell: Cell, error: BaseException) -> CellOutcome:
     """Record ``cell`` as failed when the process running it died without an outcome."""
     message = f"the worker process running the cell died ({one_line(error)})"
-    _write_status(cell, "failed", error=message)
+    write_status(cell, "failed", error=message)
     return CellOutcome(cell.name, "failed", message)
 
 
@@ -592,18 +396,3 @@ def _check_cluster(available: dict, sweep: SweepFile) -> None:
                 f"but the Ray cluster has {have:g}: lower it (gpus: 0 on machines without "
                 "GPUs) or join a cluster that has them (--address)"
             )
-
-
-def describe_cells(cells: Sequence[Cell]) -> str:
-    """The planned grid as JSON text (``eslam sweep --dry-run``)."""
-    return json_text(
-        [
-            {
-                "cell": cell.name,
-                "data": cell.config.data.path,
-                "finished": is_finished(cell),
-                "gt_mesh": cell.evaluation.gt_mesh,
-            }
-            for cell in cells
-        ]
-    )

@@ -27,7 +27,7 @@ from eslam.errors import InputError
 from eslam.io.run_dir import json_text
 from eslam.viz.sweep_plots import plot_metric_bars
 from eslam.workflows.paper_values import paper_value
-from eslam.workflows.sweep import CELL_FILE, SWEEP_FILE
+from eslam.workflows.sweep_cells import CELL_FILE, SWEEP_FILE
 
 TABLE_METRICS = (
     ("ate_rmse_cm", "ATE RMSE (cm)"),

@@ -16,15 +16,8 @@ import yaml
 from eslam.cli import main
 from eslam.errors import ConfigError, InputError
 from eslam.testing.tiny import TINY_SETTINGS
-from eslam.workflows.sweep import (
-    CELL_FILE,
-    _run_in_processes,
-    is_finished,
-    plan_cells,
-    run_cell,
-    run_sweep,
-    worker_lost,
-)
+from eslam.workflows.sweep import _run_in_processes, run_cell, run_sweep, worker_lost
+from eslam.workflows.sweep_cells import CELL_FILE, is_finished, plan_cells
 from eslam.workflows.sweep_file import load_sweep
 from eslam.workflows.table import TABLE_METRICS, write_table
 
