@@ -6,6 +6,10 @@ YAML files chain with ``inherit_from`` (mappings merge, anything else replaces),
 valid key. The machinery works on any dataclass tree: a new section is a new dataclass.
 A ``__post_init__`` check raises ValueError starting with the field's name ("threads
 must be >= 0, ...") so the error can name the file that set that field.
+
+Over 400 lines on purpose: one reader of the config language (files, inheritance,
+overrides, type coercion, the errors naming the file and key), whose parts share the
+type walk over the dataclass tree.
 """
 
 from __future__ import annotations

@@ -21,6 +21,9 @@ Timestamps are the colour frames' (seconds).
 
 The live camera (:class:`RealSenseCamera`, ``eslam run --source realsense[:SERIAL]``)
 is a :class:`~eslam.data.source.FrameSource`: frames in order, no length.
+
+Over 400 lines on purpose: the recorded (.bag/.db3) reader and the live camera share
+the sensor's conventions (depth units, streams, intrinsics, alignment) in one place.
 """
 
 from __future__ import annotations

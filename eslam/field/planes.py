@@ -25,6 +25,10 @@ per-level functions ``sample_planes_reference`` and ``sample_planes_fast``).
 
 tests/field/test_planes.py, test_fused_sampling.py and test_triton_sampling.py hold them
 equal.
+
+Over 400 lines on purpose: a level's planes, their growth with the scene bound
+(windows, re-gridding) and the plane set combining the levels are one structure; the
+sampling maths live in :mod:`eslam.field.plane_sampling`.
 """
 
 from __future__ import annotations

@@ -4,6 +4,9 @@ software device), for tests and the examples in docs/live.md.
 Both write what the readers of :mod:`eslam.data.rosbag` and :mod:`eslam.data.realsense`
 expect from real sensors: realsense-ros's topics and encodings, librealsense's own
 recorder layout.
+
+Over 400 lines on purpose: the two writers encode the same sensor conventions the two
+readers expect, side by side so a change to one shows in the other.
 """
 
 from __future__ import annotations

@@ -28,6 +28,9 @@ config's name). A variant is a list of ``key=value`` overrides, or a mapping wit
 ``overrides`` and ``paper`` (the paper's experiment it repeats, for ``eslam table``:
 :mod:`eslam.workflows.paper_values`). Every problem is one :class:`ConfigError` line
 naming the sweep file and the key. docs/sweeps.md documents the format.
+
+Over 400 lines on purpose: the sweep-file format and all its checks, so every problem
+is reported with its file and key from one place.
 """
 
 from __future__ import annotations
