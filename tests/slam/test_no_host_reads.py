@@ -9,8 +9,7 @@ import dataclasses
 import pytest
 import torch
 
-from eslam.config import ESLAMConfig, SdfTrackerConfig
-from eslam.field.scene_field import SceneField
+from eslam.config import SdfTrackerConfig
 from eslam.render.rays import camera_directions
 from eslam.slam.mapping.mapper import MappingSettings, WindowPoses, mapping_optimiser, mapping_step
 from eslam.slam.tracking.render import (
@@ -23,23 +22,10 @@ from eslam.slam.tracking.render import (
 from eslam.slam.tracking.sdf import Solver, lm_step, sdf_points, track_sdf
 from eslam.slam.tracking.sdf_system import linearise
 from eslam.slam.views import make_view
-from eslam.types import Intrinsics
 from tests.slam.test_sdf_tracking import CAMERA as SDF_CAMERA
 from tests.slam.test_sdf_tracking import TRUE_POSE, AnalyticField, perturbed, render_depth
+from tests.slam.test_steps import _setup  # the step tests' field and 40x30 view
 from tests.tripwire import HostRead, no_host_reads
-
-CAMERA = Intrinsics(width=40, height=30, fx=30.0, fy=30.0, cx=19.5, cy=14.5)
-BOUND = torch.tensor([[-1.0, 1.0], [-1.0, 1.0], [-1.0, 1.5]])
-
-
-def _setup():
-    config = ESLAMConfig()
-    field = SceneField(config.field, BOUND, torch.Generator().manual_seed(0))
-    depth = torch.full((30, 40), 0.8)
-    depth[:, :10] = 0.0
-    rgb = torch.rand(30, 40, 3, generator=torch.Generator().manual_seed(1))
-    view = make_view(rgb, depth, camera_directions(CAMERA), border=2)
-    return config, field, view
 
 
 def test_the_tripwire_catches_a_host_read_in_eslam_code() -> None:
