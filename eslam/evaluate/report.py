@@ -31,6 +31,8 @@ METRICS: tuple[tuple[str, str, str], ...] = (
     ("frames_received", "Frames received (real time)", ""),
     ("frames_dropped", "Frames dropped (real time)", ""),
     ("tracking_failures", "Frames whose tracking failed", ""),
+    ("tracking_failed_longest_run", "Longest run of failed frames", ""),
+    ("tracking_ended_tracked", "Run ended tracked", ""),
     ("tracking_degenerate_frames", "Frames with a degenerate view", ""),
     ("peak_memory_mb", "Peak memory", "MB"),
     ("frames", "Frames", ""),

@@ -169,6 +169,25 @@ def degenerate_row(row: list[float]) -> bool:
     return row[_DEGENERATE] > 0 and row[_FAILED] == 0
 
 
+def failed_stretch(rows: list[list[float]]) -> int:
+    """How many of the last ``rows`` are failed frames: how long the camera is lost."""
+    count = 0
+    for row in reversed(rows):
+        if not failed_row(row):
+            break
+        count += 1
+    return count
+
+
+def longest_failed_run(rows: list[list[float]]) -> int:
+    """The most consecutive failed frames among ``rows``."""
+    longest = current = 0
+    for row in rows:
+        current = current + 1 if failed_row(row) else 0
+        longest = max(longest, current)
+    return longest
+
+
 def degenerate_stretch(rows: list[list[float]]) -> int:
     """How many of the last ``rows`` are degenerate frames (:func:`degenerate_row`)."""
     count = 0

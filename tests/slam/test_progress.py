@@ -30,7 +30,9 @@ class Clock:
 
 
 def _start(frames: int) -> RunStart:
-    state = SimpleNamespace(next_frame=0, trajectory=SimpleNamespace(gt_poses=lambda: None))
+    state = SimpleNamespace(
+        next_frame=0, trajectory=SimpleNamespace(gt_poses=lambda: None), tracking_quality=[]
+    )
     return RunStart(None, Path("run"), state, torch.device("cpu"), "seq", frames, False)
 
 

@@ -1,5 +1,6 @@
-"""What a frame's tracking says in the run's log: frames without depth, failed frames,
-frames a view filter emptied, and where a stretch of degenerate views begins and ends.
+"""What a frame's tracking says in the run's log: frames without depth, failed frames
+and where a run of them ends, frames a view filter emptied, and where a stretch of
+degenerate views begins and ends.
 
 :class:`FrameLogObserver` reads each :class:`~eslam.slam.run.observers.FrameDone`; the
 front end and the loop only report. A resumed run picks up a degenerate stretch where
@@ -11,7 +12,7 @@ from __future__ import annotations
 import logging
 
 from eslam.slam.run.observers import FrameDone, RunObserverBase, RunStart
-from eslam.slam.state import degenerate_row, degenerate_stretch, quality_row
+from eslam.slam.state import degenerate_row, degenerate_stretch, failed_stretch, quality_row
 
 
 class FrameLogObserver(RunObserverBase):
@@ -20,9 +21,11 @@ class FrameLogObserver(RunObserverBase):
     def __init__(self, logger: logging.Logger) -> None:
         self.log = logger
         self._stretch = 0  # degenerate frames just before the next one
+        self._lost = 0  # failed frames just before the next one
 
     def on_start(self, start: RunStart) -> None:
         self._stretch = degenerate_stretch(start.state.tracking_quality)
+        self._lost = failed_stretch(start.state.tracking_quality)
 
     def on_frame(self, frame: FrameDone) -> None:
         timestamp = float("nan") if frame.frame is None else frame.frame.timestamp
@@ -57,7 +60,23 @@ class FrameLogObserver(RunObserverBase):
                 100.0 * quality.inlier_fraction,
                 1000.0 * quality.residual_m,
             )
+        self._loss(frame)
         self._degeneracy(frame.index, frame)
+
+    def _loss(self, frame: FrameDone) -> None:
+        """Log where a run of failed frames ends (the camera is tracked again)."""
+        if frame.failed:
+            self._lost += 1
+            return
+        if self._lost and frame.tracked:
+            self.log.info(
+                "frame %d: tracked again after %d failed frames (%d-%d)",
+                frame.index,
+                self._lost,
+                frame.index - self._lost,
+                frame.index - 1,
+            )
+            self._lost = 0
 
     def _degeneracy(self, index: int, frame: FrameDone) -> None:
         """Log where a stretch of degenerate views begins and ends (not every frame)."""

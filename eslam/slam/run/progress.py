@@ -18,6 +18,7 @@ import numpy as np
 from eslam.data.realtime import LatestFrameReader
 from eslam.evaluate.trajectory import absolute_trajectory_error
 from eslam.slam.run.observers import FrameDone, MappingStep, RunEnd, RunObserverBase, RunStart
+from eslam.slam.state import failed_stretch
 
 ATE_EVERY = 10
 """Frames between updates of the running ATE shown in the progress bar."""
@@ -104,6 +105,11 @@ class ProgressObserver(RunObserverBase):
         postfix = dict(self.postfix)
         if self.stream is not None:
             postfix["dropped"] = str(self.stream.counts().replaced)
+        lost = failed_stretch(self.state.tracking_quality)
+        if lost:
+            postfix["lost_frames"] = str(lost)  # the camera is lost: failed frames in a row
+        else:
+            postfix.pop("lost_frames", None)
         index = frame.index
         if index >= 2 and (index + 1) % ATE_EVERY == 0:
             ate_cm = self._ate_cm()

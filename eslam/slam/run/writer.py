@@ -37,7 +37,13 @@ from eslam.slam.run.observers import FrameDone, RunEnd, RunObserverBase, RunStar
 from eslam.slam.run.progress import finite_ate_pairs
 from eslam.slam.run.resources import PeakMemory
 from eslam.slam.run.stream_report import stream_metrics
-from eslam.slam.state import TRACKING_COLUMNS, SLAMState, degenerate_row, save_state
+from eslam.slam.state import (
+    TRACKING_COLUMNS,
+    SLAMState,
+    degenerate_row,
+    longest_failed_run,
+    save_state,
+)
 
 
 @dataclass(frozen=True)
@@ -88,8 +94,9 @@ def quality_columns(state: SLAMState) -> dict[str, np.ndarray]:
 
 def run_metrics(state: SLAMState, device: str, peak_memory_mb: float) -> dict:
     """metrics.json of a run: frames, device, FPT, peak memory, with a self-judging tracker
-    the failed frames and mean iterations (and with its degeneracy test on, the frames,
-    not failed, with a degenerate direction), and with ground truth the ATE.
+    the failed frames, the longest run of them, whether the last judged frame was tracked
+    and the mean iterations (and with its degeneracy test on, the frames, not failed,
+    with a degenerate direction), and with ground truth the ATE.
 
     FPT (seconds per frame) = (sum of tracking and mapping times) / frames. The ATE
     (rigid alignment, cm) uses the frames whose estimate and ground truth are both finite;
@@ -107,6 +114,8 @@ def run_metrics(state: SLAMState, device: str, peak_memory_mb: float) -> dict:
     judged = np.isfinite(failed)
     if judged.any():
         metrics["tracking_failures"] = int(failed[judged].sum())
+        metrics["tracking_failed_longest_run"] = longest_failed_run(state.tracking_quality)
+        metrics["tracking_ended_tracked"] = not bool(failed[judged][-1])
         metrics["tracking_iterations_mean"] = float(quality["tracking_iterations"][judged].mean())
     if np.isfinite(quality["tracking_degenerate_directions"]).any():  # the test ran
         metrics["tracking_degenerate_frames"] = sum(map(degenerate_row, state.tracking_quality))
