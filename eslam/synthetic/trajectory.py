@@ -39,13 +39,30 @@ def _sway(i: np.ndarray, period: float, rate: float, phase: float, order: int = 
     return rate * period / (2 * math.pi) * np.sin(angle)
 
 
+MAX_PITCH_SWAY_DEG = 25.0
+"""Largest pitch swing about the mean downward tilt (14-22 degrees), so the camera never
+looks straight down, where the look-at turns the image over (a 180-degree roll in one
+frame). Reached only above about 1.7 degrees of yaw per frame."""
+
+MAX_ROLL_SWAY_DEG = 10.0
+"""Largest roll swing about the horizon. Reached only above about 1.6 degrees of yaw per
+frame."""
+
+
+def _rate_for(amplitude: float, period: float) -> float:
+    """The peak rate of change per frame of a sinusoid of ``amplitude`` and ``period``."""
+    return amplitude * 2 * math.pi / period
+
+
 def camera_trajectory(scene: Scene, config: SynthConfig) -> np.ndarray:
     """Smooth hand-held-like camera-to-world poses (N, 4, 4) float64 inside the camera box.
 
     The centre runs at ``step_translation`` (+-30 %, slowly varying) along a closed
     Lissajous-like loop filling the box. The view direction sweeps in yaw at
     ``step_rotation_deg`` per frame (+-30 %, slowly varying), sways in pitch around
-    14-22 degrees down and rolls by a few degrees; a look-at builds each rotation.
+    14-22 degrees down and rolls by a few degrees (their swings grow with the step, up
+    to :data:`MAX_PITCH_SWAY_DEG` and :data:`MAX_ROLL_SWAY_DEG`, so a fast yaw stays a
+    yaw); a look-at builds each rotation.
     """
     rng = np.random.default_rng([config.seed, 1])
     phase = rng.uniform(0.0, 2 * math.pi, 8)
@@ -70,8 +87,10 @@ def camera_trajectory(scene: Scene, config: SynthConfig) -> np.ndarray:
     step = math.radians(config.step_rotation_deg)
     spin = rng.choice([-1.0, 1.0])
     yaw = rng.uniform(0.0, 2 * math.pi) + spin * (step * i + _sway(i, 240, 0.3 * step, phase[5]))
-    pitch = -math.radians(rng.uniform(14.0, 22.0)) + _sway(i, 300, 0.3 * step, phase[6])
-    roll = _sway(i, 400, 0.1 * step, phase[7])
+    pitch_rate = min(0.3 * step, _rate_for(math.radians(MAX_PITCH_SWAY_DEG), 300))
+    roll_rate = min(0.1 * step, _rate_for(math.radians(MAX_ROLL_SWAY_DEG), 400))
+    pitch = -math.radians(rng.uniform(14.0, 22.0)) + _sway(i, 300, pitch_rate, phase[6])
+    roll = _sway(i, 400, roll_rate, phase[7])
     forward = np.stack([np.cos(pitch) * np.cos(yaw), np.cos(pitch) * np.sin(yaw), np.sin(pitch)], 1)
     return np.stack(
         [look_at(p, p + 2.0 * f, r) for p, f, r in zip(positions, forward, roll, strict=True)]

@@ -141,6 +141,20 @@ def test_trajectory_is_smooth_hand_held_and_inside_the_free_area(seed: int) -> N
     np.testing.assert_array_equal(camera_trajectory(scene, replace(config, frames=20)), poses[:20])
 
 
+@pytest.mark.parametrize("step_deg", [3.0, 6.0, 10.0])
+def test_a_fast_yaw_stays_a_yaw(step_deg: float) -> None:
+    """Tens to hundreds of degrees per second of yaw: the pitch and roll swings stay
+    bounded, so the camera never looks straight down, where the look-at turns the image
+    over (at 6 degrees per frame the unbounded swings once made a 175-degree step)."""
+    config = SynthConfig(frames=300, seed=0, step_rotation_deg=step_deg)
+    poses = camera_trajectory(build_scene("room", 0), config)
+    _, rotation = _steps(poses)
+    assert rotation.max() < 1.6 * step_deg  # the yaw step (+-30 %) and a little sway
+    forward = poses[:, :3, 2]  # the optical axis in the world (z up)
+    pitch = np.degrees(np.arcsin(forward[:, 2]))
+    assert pitch.min() > -50.0 and pitch.max() < 15.0
+
+
 def test_look_at_builds_opencv_axes_and_survives_looking_straight_down() -> None:
     pose = look_at(np.zeros(3), np.array([1.0, 0.0, 0.0]))
     np.testing.assert_allclose(pose[:3, :3], [[0, 0, 1], [-1, 0, 0], [0, -1, 0]], atol=1e-12)
