@@ -267,8 +267,9 @@ def run_slam(
                 memory.start()
                 logs = [LogObserver(run_logger), FrameLogObserver(run_logger)]
                 everyone = Observers([writer, *logs, progress, *reports, *observers])
+                camera = state.keyframes.intrinsics  # the camera the keyframes are stored with
                 context = RunContext.build(
-                    config, device, intrinsics, everyone, run_logger, source.name
+                    config, device, camera, everyone, run_logger, source.name
                 )
                 front_end, back_end = components.build(context)
                 loop = RunLoop(state, front_end, back_end, everyone, real_time)
