@@ -165,10 +165,11 @@ def _coordinate_gradient(
 ) -> torch.Tensor:
     """dL/dcoords (N, 3) from the dots d_nk = <P[r_nk], g_n> (module doc).
 
-    The dots come from aten's embedding_bag per-sample-weight backward: 2.3x faster on
-    the tracking workload (2-core CPU) than one embedding_bag of the derivative weights
-    over each axis's 8 corners, and faster still than gathering (N, 12, C) rows for a
-    batched matmul. tests/field/test_fused_sampling.py holds it to the reference.
+    The dots come from aten's embedding_bag per-sample-weight backward: faster on the
+    tracking workload (2-core CPU, when it was chosen) than one embedding_bag of the
+    derivative weights over each axis's 8 corners, and faster still than gathering
+    (N, 12, C) rows for a batched matmul. tests/field/test_fused_sampling.py holds it to
+    the reference.
     """
     count = grad.shape[0]
     offsets, bag = _bag_layout(count, grad.device)
