@@ -115,3 +115,30 @@ def test_sdf_tracking_reads_the_host_a_fixed_number_of_times_per_frame() -> None
         poses[iterations] = result.pose
     assert len(reads[4]) == len(reads[12]) > 0
     assert not torch.equal(poses[12], start)
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="no CUDA device")
+@pytest.mark.parametrize("degeneracy", [0.0, 0.01])
+def test_the_sdf_tracking_step_does_not_sync_with_the_device(degeneracy: float) -> None:
+    """On a GPU, as CUDA's sync debug mode sees it (the degeneracy test's eigh included),
+    on the step tests' field and view (test_steps.py)."""
+    config, field, view = _setup("cuda")
+    settings = dataclasses.replace(config.tracking.sdf, degeneracy=degeneracy)
+    points, _ = sdf_points(view, 500, torch.Generator(device="cuda").manual_seed(0))
+    start = torch.eye(4, device="cuda")
+    with frozen(field):
+        solver = Solver(
+            start,
+            linearise(field, points, start, settings),
+            torch.tensor(settings.damping, dtype=torch.float64, device="cuda"),
+            torch.ones((), dtype=torch.bool, device="cuda"),
+            torch.zeros((), dtype=torch.int64, device="cuda"),
+        )
+        solver = lm_step(field, points, None, settings, solver)  # may set up lazily
+        torch.cuda.synchronize()
+        torch.cuda.set_sync_debug_mode("error")
+        try:
+            for _ in range(3):
+                solver = lm_step(field, points, None, settings, solver)
+        finally:
+            torch.cuda.set_sync_debug_mode("default")
