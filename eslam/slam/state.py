@@ -15,6 +15,7 @@ so a checkpoint written after a failure holds exactly the completed frames.
 from __future__ import annotations
 
 import copy
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -169,14 +170,19 @@ def degenerate_row(row: list[float]) -> bool:
     return row[_DEGENERATE] > 0 and row[_FAILED] == 0
 
 
-def failed_stretch(rows: list[list[float]]) -> int:
-    """How many of the last ``rows`` are failed frames: how long the camera is lost."""
+def _trailing(rows: list[list[float]], test: Callable[[list[float]], bool]) -> int:
+    """How many of the last ``rows`` pass ``test``, counted back from the newest."""
     count = 0
     for row in reversed(rows):
-        if not failed_row(row):
+        if not test(row):
             break
         count += 1
     return count
+
+
+def failed_stretch(rows: list[list[float]]) -> int:
+    """How many of the last ``rows`` are failed frames: how long the camera is lost."""
+    return _trailing(rows, failed_row)
 
 
 def longest_failed_run(rows: list[list[float]]) -> int:
@@ -190,12 +196,7 @@ def longest_failed_run(rows: list[list[float]]) -> int:
 
 def degenerate_stretch(rows: list[list[float]]) -> int:
     """How many of the last ``rows`` are degenerate frames (:func:`degenerate_row`)."""
-    count = 0
-    for row in reversed(rows):
-        if not degenerate_row(row):
-            break
-        count += 1
-    return count
+    return _trailing(rows, degenerate_row)
 
 
 def quality_rows(saved: list[list[float]]) -> list[list[float]]:
