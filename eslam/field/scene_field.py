@@ -70,6 +70,8 @@ class SceneField(nn.Module):
             sampling=config.plane_sampling,
             generator=generator,
         )
+        # whether every level of both plane sets is sampled in one op (chosen once)
+        self.rows_at_once = PLANE_SAMPLINGS.make(config.plane_sampling).rows
         self.geometry = PlaneSet(fitted, config.geometry_resolution, **common)
         self.appearance = (
             None
@@ -169,7 +171,7 @@ class SceneField(nn.Module):
         sampled in one op.
         """
         colour_set = self.appearance if with_colour else None
-        if PLANE_SAMPLINGS.make(self.config.plane_sampling).rows:
+        if self.rows_at_once:
             sets = [self.geometry] if colour_set is None else [self.geometry, colour_set]
             features = fused_features(sets, points_n)
             geometry = features[0]
