@@ -39,48 +39,36 @@ def image_size(text: str) -> tuple[int, int]:
     return width, height
 
 
+def _number(text: str, convert, accept, expected: str):
+    """``convert(text)`` when ``accept`` holds for it, else the argparse error naming
+    what was ``expected`` (nan is refused: it passes no comparison)."""
+    try:
+        value = convert(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected {expected}, got '{text}'") from None
+    if not accept(value):
+        raise argparse.ArgumentTypeError(f"expected {expected}, got '{text}'")
+    return value
+
+
 def positive_int(text: str) -> int:
     """Parse an integer > 0."""
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got '{text}'") from None
-    if value <= 0:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got '{text}'")
-    return value
+    return _number(text, int, lambda value: value > 0, "a positive integer")
 
 
 def non_negative_int(text: str) -> int:
     """Parse an integer >= 0."""
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got '{text}'") from None
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got '{text}'")
-    return value
+    return _number(text, int, lambda value: value >= 0, "an integer >= 0")
 
 
 def positive_float(text: str) -> float:
     """Parse a number > 0 (not nan)."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a positive number, got '{text}'") from None
-    if not value > 0:
-        raise argparse.ArgumentTypeError(f"expected a positive number, got '{text}'")
-    return value
+    return _number(text, float, lambda value: value > 0, "a positive number")
 
 
 def non_negative_float(text: str) -> float:
     """Parse a number >= 0 (not nan)."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number, got '{text}'") from None
-    if not value >= 0:
-        raise argparse.ArgumentTypeError(f"expected a number >= 0, got '{text}'")
-    return value
+    return _number(text, float, lambda value: value >= 0, "a number >= 0")
 
 
 def settings_epilog() -> str:
