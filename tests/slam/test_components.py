@@ -18,6 +18,7 @@ from eslam.io.checkpoint import load_checkpoint
 from eslam.registry import Registry
 from eslam.slam.mapping.backend import BACK_ENDS, KeyframeBackEnd
 from eslam.slam.mapping.windows import WINDOWS
+from eslam.slam.run.observers import RunObserverBase
 from eslam.slam.session import Components, run_slam
 from eslam.slam.tracking.frontend import TrackingFrontEnd
 from eslam.slam.tracking.trackers import TRACKERS
@@ -90,6 +91,7 @@ class LeftHalf:
     """A view filter from outside eslam: only the image's left half is tracked on."""
 
     name = "left_half"
+    emptied = "no pixel in the left half"
 
     def __init__(self, context) -> None:
         self.width = context.intrinsics.width
@@ -157,3 +159,43 @@ def test_components_from_outside_run_without_editing_the_loop(
         assert len(columns) > 0 and int(columns.max()) < width // 2
     # tracked on half the image, the run still follows the camera
     assert result.metrics["ate_rmse_cm"] < 0.3 * tiny_static_ate_cm
+
+
+class NothingFrom:
+    """A view filter that leaves no pixel from frame 5 on."""
+
+    name = "nothing_from_5"
+    emptied = "the test filter keeps nothing from frame 5 on"
+
+    def keep(self, view, guess, state):
+        keep = state.next_frame < 5
+        return torch.full_like(view.depth, keep, dtype=torch.bool)
+
+
+class Frames(RunObserverBase):
+    """Remembers every FrameDone."""
+
+    def __init__(self) -> None:
+        self.done: list = []
+
+    def on_frame(self, frame) -> None:
+        self.done.append(frame)
+
+
+@pytest.mark.slow
+def test_a_frame_a_view_filter_empties_keeps_the_guess_and_says_why(
+    tiny_sequence: Path, tmp_path: Path
+) -> None:
+    config = tiny_config(tiny_sequence, "output.mesh=false")
+    seen = Frames()
+
+    def front_end(context):
+        return TrackingFrontEnd(context, filters=[NothingFrom()])
+
+    run_slam(config, tmp_path / "run", components=Components(front_end), observers=[seen])
+    assert [frame.tracked for frame in seen.done] == [False] + [True] * 4 + [False] * 7
+    assert all(frame.emptied_by == NothingFrom.emptied for frame in seen.done[5:])
+    assert all(frame.emptied_by is None for frame in seen.done[:5])
+    log = (tmp_path / "run" / "log.txt").read_text()
+    assert f"frame 5: {NothingFrom.emptied}: not tracked, the motion model's pose is kept" in log
+    assert log.count(NothingFrom.emptied) == TINY_FRAMES - 5

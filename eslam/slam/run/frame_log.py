@@ -36,16 +36,9 @@ class FrameLogObserver(RunObserverBase):
                 frame.index,
                 timestamp,
             )
-        if frame.emptied_by == "observed":
+        if frame.emptied_by is not None:
             self.log.warning(
-                "frame %d: none of its pixels lies in space a keyframe observed "
-                "(tracking.observed_only): not tracked, the motion model's pose is kept",
-                frame.index,
-            )
-        elif frame.emptied_by is not None:
-            self.log.warning(
-                "frame %d: the view filter '%s' left no pixel: not tracked, the motion "
-                "model's pose is kept",
+                "frame %d: %s: not tracked, the motion model's pose is kept",
                 frame.index,
                 frame.emptied_by,
             )

@@ -68,8 +68,8 @@ class FrameDone:
         frame: the input frame itself (host images, camera, ground truth), for observers
             that show it (a viewer); None where a sender has none to give.
         has_depth: whether the frame had any valid depth (none: not tracked or mapped).
-        emptied_by: the view filter that left the frame no pixel to track on (it kept
-            the motion model's pose), else None.
+        emptied_by: why a view filter left the frame no pixel to track on, in the
+            filter's words (it kept the motion model's pose), else None.
     """
 
     index: int

@@ -40,8 +40,9 @@ class TrackedFrame:
         has_depth: whether the frame has any valid depth (none: not tracked, not mapped).
         tracked: whether the tracker ran.
         quality: the tracker's judgement (None when it has none or did not run).
-        emptied_by: the name of the view filter that left no pixel to track on (the
-            frame keeps the guess), else None.
+        emptied_by: why a view filter left no pixel to track on, in its words
+            (:attr:`~eslam.slam.tracking.view_filters.ViewFilter.emptied`; the frame
+            keeps the guess), else None.
     """
 
     pose: torch.Tensor
@@ -99,7 +100,7 @@ class TrackingFrontEnd:
         for view_filter in self.filters:
             restricted = restrict_view(view, view_filter.keep(view, guess, state))
             if restricted.sampleable_pixels() == 0 and view.sampleable_pixels() > 0:
-                return TrackedFrame(guess, has_depth, emptied_by=view_filter.name)
+                return TrackedFrame(guess, has_depth, emptied_by=view_filter.emptied)
             view = restricted
         if view.sampleable_pixels() == 0:
             return TrackedFrame(guess, has_depth)

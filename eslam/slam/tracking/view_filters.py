@@ -28,7 +28,10 @@ class ViewFilter(Protocol):
     """Chooses the pixels of a frame to track on."""
 
     name: str
-    """Its name, reported when it leaves a frame no pixel."""
+    """Its name (the one it is registered under)."""
+
+    emptied: str
+    """What the log says of a frame it leaves no pixel: why none is left."""
 
     def keep(self, view: View, guess: torch.Tensor, state: SLAMState) -> torch.Tensor:
         """(P,) bool on the view's device: the pixels of ``view`` to keep, with the
@@ -41,6 +44,7 @@ class ObservedSpace:
     :mod:`eslam.slam.tracking.observed_view`)."""
 
     name = "observed"
+    emptied = "none of its pixels lies in space a keyframe observed (tracking.observed_only)"
 
     def keep(self, view: View, guess: torch.Tensor, state: SLAMState) -> torch.Tensor:
         return observed_pixels(view, guess, state.observed_views())
