@@ -20,6 +20,7 @@ from pathlib import Path
 
 import torch
 
+from eslam.cli.args import image_size
 from eslam.config import load_config
 from eslam.slam.session import run_slam
 from eslam.synthetic import SynthConfig, read_synthetic_bound, write_synthetic_sequence
@@ -78,18 +79,13 @@ def table(runs: list[YawRun], fps: float) -> str:
     return "\n".join(lines)
 
 
-def parse_size(text: str) -> tuple[int, int]:
-    width, _, height = text.partition("x")
-    return int(width), int(height)
-
-
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n", 1)[0])
     parser.add_argument("--steps", type=float, nargs="+", required=True, help="deg/frame")
     parser.add_argument("--out", type=Path, required=True, help="folder for data and runs")
     parser.add_argument("--config", type=Path, default=DEMO_CONFIG, help="(configs/demo.yaml)")
     parser.add_argument("--frames", type=int, default=40)
-    parser.add_argument("--size", type=parse_size, default=(160, 120), help="WxH (160x120)")
+    parser.add_argument("--size", type=image_size, default=(160, 120), help="WxH (160x120)")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--fps", type=float, default=30.0, help="for the deg/s column (30)")
     parser.add_argument("--threads", type=int, default=1)
