@@ -1,6 +1,7 @@
 """A CPU stand-in for CUDA's sync debug mode: eslam code that reads a tensor's value on
-the host (``bool``, ``int``, ``float``, ``.item()``, ``.tolist()``) raises inside
-:func:`no_host_reads`.
+the host (``bool``, ``int``, ``float``, ``.item()``, ``.tolist()``) or makes a shape
+that depends on values (``.nonzero()``, ``.masked_select()``, indexing with a boolean
+mask) raises inside :func:`no_host_reads`.
 
 On a GPU each such read waits for the device; a step that makes none can be queued
 ahead or captured in a CUDA graph. Only reads whose caller is eslam's own code trip the
@@ -19,7 +20,27 @@ import torch
 import eslam
 
 ESLAM_ROOT = str(Path(eslam.__file__).resolve().parent)
-READS = ("__bool__", "__int__", "__float__", "__index__", "item", "tolist")
+READS = (
+    "__bool__",
+    "__int__",
+    "__float__",
+    "__index__",
+    "item",
+    "tolist",
+    "nonzero",
+    "masked_select",
+    "__getitem__",
+)
+
+
+def _is_read(name: str, args: tuple) -> bool:
+    """Whether the call waits for the device: always, except indexing, which does only
+    with a boolean mask (its result's shape depends on the values)."""
+    if name != "__getitem__":
+        return True
+    index = args[0] if args else None
+    parts = index if isinstance(index, tuple) else (index,)
+    return any(isinstance(part, torch.Tensor) and part.dtype == torch.bool for part in parts)
 
 
 class HostRead(AssertionError):
@@ -38,6 +59,8 @@ def no_host_reads(count_only: bool = False) -> Iterator[list[str]]:
         original = originals[name]
 
         def read(self, *args, **kwargs):
+            if not _is_read(name, args):
+                return original(self, *args, **kwargs)
             caller = sys._getframe(1).f_code.co_filename
             where = f"{caller}:{sys._getframe(1).f_lineno}"
             ours = str(Path(caller).resolve()).startswith(ESLAM_ROOT)

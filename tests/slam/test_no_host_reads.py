@@ -33,6 +33,10 @@ def test_the_tripwire_catches_a_host_read_in_eslam_code() -> None:
     with no_host_reads(), pytest.raises(HostRead, match=r"__int__ .*views\.py"):
         view.sampleable_pixels()  # int(count): a read the loop makes between frames
     assert view.sampleable_pixels() > 0  # restored on the way out
+    with no_host_reads(count_only=True) as seen:  # reads from here are listed, not raised
+        view.depth[view.depth > 0]  # a boolean mask: its shape waits for the values
+        view.depth[:5], view.depth[torch.arange(3)]  # plain and integer indexing: no read
+    assert [read.split()[0] for read in seen] == ["__getitem__"]
 
 
 def test_the_render_tracking_step_reads_nothing_on_the_host() -> None:
