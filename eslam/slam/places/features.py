@@ -1,0 +1,193 @@
+"""Image features for place recognition (OpenCV): a global descriptor per image, local
+features with their depth, matching, and a camera pose from matches.
+
+- The global descriptor is the *small blurry image* of Klein and Murray (ECCV 2008,
+  "Improving the agility of keyframe-based SLAM"), the relocaliser of PTAM: the grey
+  image shrunk to :data:`THUMBNAIL` pixels (``cv2.resize``, area averaging), blurred
+  (``cv2.GaussianBlur``, sigma 2.5 thumbnail pixels), then made zero-mean and unit-norm,
+  so that the dot product of two is their normalised cross-correlation (1 = alike).
+  It needs no vocabulary trained beforehand and costs microseconds per keyframe; it
+  ranks keyframes, it does not decide: the matches and the map do.
+- Local features are ORB (Rublee et al., ICCV 2011; ``cv2.ORB_create``), matched by
+  Hamming distance with Lowe's ratio test (IJCV 2004) and kept where both ways agree.
+- A pose from matches: the keyframe's features with depth give world points, the
+  frame's features with its own depth camera points; a rigid motion fitted in RANSAC
+  (:func:`rigid_pose`) carries one onto the other. Camera axes are OpenCV's, as
+  everywhere in eslam.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from eslam.types import Intrinsics
+
+THUMBNAIL = (40, 30)
+"""Width and height of the small blurry image (Klein and Murray use 40 x 30)."""
+
+BLUR_SIGMA = 2.5
+"""Gaussian blur of the small image, in its pixels (Klein and Murray: 2.5)."""
+
+FLAT_GREY = 0.01
+"""RMS contrast (grey levels of 255) below which a small image counts as flat."""
+
+RATIO = 0.8
+"""Lowe's ratio: a match is kept when its distance is below this times the second best."""
+
+INLIER_M = 0.03
+"""Distance (metres) within which a match agrees with a rigid pose."""
+
+RANSAC_ITERATIONS = 200
+"""Three-point samples tried per pose."""
+
+
+def opencv() -> Any:
+    """The ``cv2`` module (opencv-python-headless, a dependency of eslam)."""
+    import cv2
+
+    return cv2
+
+
+def grey(rgb: np.ndarray) -> np.ndarray:
+    """(H, W) uint8 luminance of an (H, W, 3) uint8 RGB image (ITU-R BT.601 weights)."""
+    return opencv().cvtColor(np.ascontiguousarray(rgb), opencv().COLOR_RGB2GRAY)
+
+
+def thumbnail(rgb: np.ndarray) -> np.ndarray:
+    """The global descriptor of an (H, W, 3) uint8 image: (40 * 30,) float32, zero mean
+    and unit norm (module doc); all zeros for a flat image (alike to nothing)."""
+    cv2 = opencv()
+    small = cv2.resize(grey(rgb), THUMBNAIL, interpolation=cv2.INTER_AREA).astype(np.float32)
+    small = cv2.GaussianBlur(small, (0, 0), BLUR_SIGMA)
+    vector = small.reshape(-1) - small.mean()
+    norm = float(np.linalg.norm(vector))
+    if norm < FLAT_GREY * np.sqrt(vector.size):  # only the blur's round-off is left
+        return np.zeros_like(vector)
+    return vector / norm
+
+
+@dataclass(frozen=True, eq=False)
+class Features:
+    """An image's ORB features.
+
+    Attributes:
+        pixels: (N, 2) float32 keypoint positions (x, y) in pixels.
+        descriptors: (N, 32) uint8 ORB descriptors.
+        points: (N, 3) float32 camera-frame points q = d (x - cx) / fx, ... at the
+            keypoints' depth (nearest pixel); NaN where the depth is missing.
+    """
+
+    pixels: np.ndarray
+    descriptors: np.ndarray
+    points: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.pixels)
+
+
+def orb_features(
+    rgb: np.ndarray, depth: np.ndarray, intrinsics: Intrinsics, count: int = 1000
+) -> Features:
+    """Up to ``count`` ORB features of an (H, W, 3) uint8 image with its (H, W) depth
+    in metres (0 = missing), back-projected with ``intrinsics``."""
+    cv2 = opencv()
+    orb = cv2.ORB_create(nfeatures=count)
+    keypoints, descriptors = orb.detectAndCompute(grey(rgb), None)
+    if descriptors is None or not keypoints:
+        empty = np.zeros((0, 2), np.float32)
+        return Features(empty, np.zeros((0, 32), np.uint8), np.zeros((0, 3), np.float32))
+    pixels = np.array([k.pt for k in keypoints], dtype=np.float32)
+    cols = np.clip(np.rint(pixels[:, 0]).astype(int), 0, depth.shape[1] - 1)
+    rows = np.clip(np.rint(pixels[:, 1]).astype(int), 0, depth.shape[0] - 1)
+    z = depth[rows, cols].astype(np.float32)
+    z = np.where(z > 0, z, np.nan)
+    x = (pixels[:, 0] - intrinsics.cx) / intrinsics.fx * z
+    y = (pixels[:, 1] - intrinsics.cy) / intrinsics.fy * z
+    return Features(pixels, descriptors, np.stack([x, y, z], axis=1))
+
+
+def mutual_matches(a: np.ndarray, b: np.ndarray, ratio: float = RATIO) -> np.ndarray:
+    """(M, 2) int index pairs (into ``a``, into ``b``) of ORB descriptors that pass the
+    ratio test from ``a`` to ``b`` and are each other's nearest both ways."""
+    if len(a) < 2 or len(b) < 2:
+        return np.zeros((0, 2), np.int64)
+    cv2 = opencv()
+    matcher = cv2.BFMatcher(cv2.NORM_HAMMING)
+    forward = matcher.knnMatch(a, b, k=2)
+    backward = {m.queryIdx: m.trainIdx for m in matcher.match(b, a)}
+    pairs = [
+        (pair[0].queryIdx, pair[0].trainIdx)
+        for pair in forward
+        if len(pair) == 2
+        and pair[0].distance < ratio * pair[1].distance
+        and backward.get(pair[0].trainIdx) == pair[0].queryIdx
+    ]
+    return np.array(pairs, dtype=np.int64).reshape(-1, 2)
+
+
+@dataclass(frozen=True)
+class RigidResult:
+    """A camera pose from matches: (4, 4) float64 camera-to-world and the inlier count."""
+
+    pose: np.ndarray
+    inliers: int
+
+
+def rigid_fit(camera: np.ndarray, world: np.ndarray) -> np.ndarray:
+    """(4, 4) the rigid motion T = [R t] minimising sum |R q_i + t - p_i|^2 over (N, 3)
+    ``camera`` points q and ``world`` points p, N >= 3 (Arun, Huang and Blostein, PAMI
+    1987): R solves Wahba's problem on the centred points
+    (``scipy.spatial.transform.Rotation.align_vectors``), t = mean(p) - R mean(q)."""
+    q_mean, p_mean = camera.mean(axis=0), world.mean(axis=0)
+    rotation, _ = Rotation.align_vectors(world - p_mean, camera - q_mean)
+    pose = np.eye(4)
+    pose[:3, :3] = rotation.as_matrix()
+    pose[:3, 3] = p_mean - pose[:3, :3] @ q_mean
+    return pose
+
+
+def rigid_pose(
+    camera: np.ndarray,
+    world: np.ndarray,
+    min_inliers: int,
+    seed: int = 0,
+    threshold_m: float = INLIER_M,
+    iterations: int = RANSAC_ITERATIONS,
+) -> RigidResult | None:
+    """The camera-to-world pose that carries the (N, 3) ``camera`` points (the frame's
+    matched features with its depth) onto their matches' (N, 3) ``world`` points: RANSAC
+    (Fischler and Bolles 1981) over fits of 3 matches (:func:`rigid_fit`; samples drawn
+    with ``seed``), an inlier being within ``threshold_m``, then refitted on the best
+    sample's inliers; None with fewer than ``min_inliers`` inliers.
+
+    With depth on both sides this is better posed than a perspective-n-point pose from
+    pixels, which on a few dozen features of a room's planes often flips."""
+    count = len(camera)
+    if count < max(min_inliers, 3):
+        return None
+    generator = np.random.default_rng(seed)
+    best = np.zeros(count, dtype=bool)
+    for _ in range(iterations):
+        sample = generator.choice(count, size=3, replace=False)
+        if np.linalg.matrix_rank(world[sample] - world[sample].mean(axis=0), tol=1e-3) < 2:
+            continue  # collinear: no rotation about their line
+        pose = rigid_fit(camera[sample], world[sample])
+        inliers = residuals(pose, camera, world) < threshold_m
+        if inliers.sum() > best.sum():
+            best = inliers
+    if best.sum() < max(min_inliers, 3):
+        return None
+    pose = rigid_fit(camera[best], world[best])
+    inliers = residuals(pose, camera, world) < threshold_m
+    if inliers.sum() < min_inliers:
+        return None
+    return RigidResult(pose, int(inliers.sum()))
+
+
+def residuals(pose: np.ndarray, camera: np.ndarray, world: np.ndarray) -> np.ndarray:
+    """(N,) distances |R q_i + t - p_i| in metres."""
+    return np.linalg.norm(camera @ pose[:3, :3].T + pose[:3, 3] - world, axis=1)

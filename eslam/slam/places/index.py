@@ -1,0 +1,117 @@
+"""The keyframes as places: which look like a frame, and where the frame is if it sees
+the same place as one of them (:mod:`eslam.slam.places.features` for the maths).
+
+:class:`PlaceIndex` describes each keyframe once, when it is first asked about (its
+global descriptor and ORB features with depth, in its own camera frame), from the
+keyframe store's images: nothing is saved with the run, a resumed run describes its
+keyframes again and gets the same answers. A keyframe's pose is read from the
+trajectory at query time, so poses refined by mapping (or a pose graph) are used as
+they are now.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from eslam.slam.mapping.keyframes import KeyframeStore
+from eslam.slam.places.features import (
+    Features,
+    mutual_matches,
+    orb_features,
+    rigid_pose,
+    thumbnail,
+)
+
+
+@dataclass(frozen=True, eq=False)
+class Place:
+    """An image as a place: its global descriptor and its ORB features with depth."""
+
+    descriptor: np.ndarray
+    features: Features
+
+
+def describe(rgb: np.ndarray, depth: np.ndarray, store: KeyframeStore) -> Place:
+    """An (H, W, 3) uint8 image with its (H, W) depth in metres as a :class:`Place`
+    (the store's camera)."""
+    return Place(thumbnail(rgb), orb_features(rgb, depth, store.intrinsics))
+
+
+@dataclass(frozen=True)
+class PlaceMatch:
+    """A keyframe that may see what the query sees.
+
+    Attributes:
+        keyframe: its keyframe id in the store.
+        similarity: the global descriptors' correlation (1 = alike).
+        pose: (4, 4) float64 camera-to-world of the query from the matches.
+        inliers: matches that agree on ``pose``.
+    """
+
+    keyframe: int
+    similarity: float
+    pose: np.ndarray
+    inliers: int
+
+
+class PlaceIndex:
+    """The keyframes of ``store`` as places (module doc).
+
+    Args:
+        store: the run's keyframe store (its images and, through the trajectory, poses).
+    """
+
+    def __init__(self, store: KeyframeStore) -> None:
+        self.store = store
+        self._places: list[tuple[int, Place]] = []  # (frame index, place) by keyframe id
+
+    def place(self, k: int) -> Place:
+        """Keyframe ``k`` as a place (described on first use; a keyframe id reused by
+        another frame after a rollback is described again)."""
+        frames = self.store.frame_indices
+        del self._places[len(frames) :]
+        for stale, (frame, _) in enumerate(self._places):
+            if frame != frames[stale]:
+                del self._places[stale:]
+                break
+        while len(self._places) <= k:
+            j = len(self._places)
+            rgb = (self.store.rgb(j, "cpu") * 255.0).round().to(torch.uint8).numpy()
+            depth = self.store.depth(j, "cpu").numpy()
+            self._places.append((frames[j], describe(rgb, depth, self.store)))
+        return self._places[k][1]
+
+    def alike(self, query: Place, count: int) -> list[tuple[int, float]]:
+        """The ``count`` keyframes whose global descriptors correlate most with
+        ``query``'s: (keyframe id, similarity), most alike first (ties: older first)."""
+        total = len(self.store)
+        if total == 0:
+            return []
+        descriptors = [self.place(k).descriptor for k in range(total)]
+        scores = np.array([float(d @ query.descriptor) for d in descriptors])
+        order = np.argsort(-scores, kind="stable")[:count]
+        return [(int(k), float(scores[k])) for k in order]
+
+    def locate(self, query: Place, k: int, min_inliers: int, seed: int = 0) -> PlaceMatch | None:
+        """Where the query's camera is if it sees keyframe ``k``'s place: its features
+        matched to the keyframe's, both with depth (the keyframe's placed with its pose
+        now), give the pose by a rigid fit in RANSAC; None without ``min_inliers``
+        agreeing matches."""
+        place = self.place(k)
+        pairs = mutual_matches(query.features.descriptors, place.features.descriptors)
+        if len(pairs) == 0:
+            return None
+        camera = query.features.points[pairs[:, 0]]
+        points = place.features.points[pairs[:, 1]]
+        usable = np.isfinite(points).all(axis=1) & np.isfinite(camera).all(axis=1)
+        pose = self.store.trajectory.poses[self.store.frame_indices[k]].detach().cpu().double()
+        pose = pose.numpy()
+        world = points[usable] @ pose[:3, :3].T + pose[:3, 3]
+        found = rigid_pose(camera[usable].astype(np.float64), world, min_inliers, seed)
+        if found is None:
+            return None
+        similarity = float(place.descriptor @ query.descriptor)
+        return PlaceMatch(k, similarity, found.pose, found.inliers)
