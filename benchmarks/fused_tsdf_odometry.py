@@ -13,7 +13,7 @@ projective point-to-plane ICP against a raycast of the same volume). No neural f
 no mapping, no rendering. A frame the tracker reports as failed keeps the guess and is
 not fused, as the run loop does with keyframes; the motion model and that rule are the
 front end's own (:func:`~eslam.slam.tracking.trackers.motion_guess`,
-:func:`~eslam.slam.tracking.frontend.judged`).
+:func:`~eslam.slam.tracking.base.judged`).
 
 It writes ``trajectory.txt`` into ``--out`` (readable by ``eslam ate`` and
 ``benchmarks/trajectory_consistency.py``) and appends ATE RMSE, Sim(3) ATE and scale,
@@ -73,7 +73,7 @@ from eslam.geometry.camera import pixels_to_camera_directions, project_points
 from eslam.io.trajectory import write_tum_trajectory
 from eslam.render.rays import camera_directions
 from eslam.slam.mapping.warm_start import projective_tsdf
-from eslam.slam.tracking.frontend import judged
+from eslam.slam.tracking.base import judged
 from eslam.slam.tracking.sdf import track_sdf
 from eslam.slam.tracking.trackers import motion_guess
 from eslam.slam.views import View, make_view

@@ -390,6 +390,45 @@ class HybridTrackerConfig:
 
 
 @dataclass
+class RecoveryConfig:
+    """What the tracking front end tries when the tracker fails a frame, in this order,
+    until a try passes the tracker's own tests and ``min_inlier_fraction``
+    (docs/tracking.md, "Recovery"). Nothing runs for a frame that tracks: such runs are
+    unchanged. Needs a tracker that judges itself (``sdf``, ``hybrid``)."""
+
+    enabled: bool = True
+    """Off: a failed frame keeps the motion model's guess and is no keyframe."""
+    min_inlier_fraction: float = 0.75
+    """Share of inliers a recovered try needs (a frame tracked from the guess needs
+    ``tracking.sdf.min_inlier_fraction``): a try from another pose can fit part of a
+    view at a wrong pose (the floor, a wall), and a recovered frame becomes a keyframe."""
+    keyframe_starts: int = 2
+    """First try from the last pose held still and from the poses of this many
+    keyframes nearest the guess (translation in metres plus rotation in radians)."""
+    relocalise_after: int = 2
+    """Relocalise once this many frames in a row failed (this one included): the
+    keyframes that look most alike (a global image descriptor, then feature matches and
+    a rigid fit of the matched features' depth points; OpenCV, SciPy) are verified by
+    tracking from there.
+    0 = never."""
+    candidates: int = 3
+    """Keyframes verified per relocalisation (the most alike first)."""
+    min_matches: int = 20
+    """Feature matches that must agree on one pose (RANSAC inliers within 3 cm) before a
+    candidate's pose is tried; with fewer, the candidate keyframe's own pose is tried."""
+
+    def __post_init__(self) -> None:
+        if not 0 <= self.min_inlier_fraction <= 1:
+            raise ValueError(
+                f"min_inlier_fraction must be in [0, 1], got {self.min_inlier_fraction}"
+            )
+        _at_least(self, "keyframe_starts", 0)
+        _at_least(self, "relocalise_after", 0)
+        _at_least(self, "candidates", 1)
+        _at_least(self, "min_matches", 6)
+
+
+@dataclass
 class TrackingConfig:
     """Camera tracking, once per frame (docs/method.md section 4)."""
 
@@ -413,6 +452,8 @@ class TrackingConfig:
     """Settings of the SDF tracker (``method: sdf`` and ``hybrid``)."""
     hybrid: HybridTrackerConfig = field(default_factory=HybridTrackerConfig)
     """Settings of the hybrid tracker (``method: hybrid``)."""
+    recovery: RecoveryConfig = field(default_factory=RecoveryConfig)
+    """What is tried when the tracker fails a frame (``sdf`` and ``hybrid``)."""
 
     def __post_init__(self) -> None:
         if self.border < 0:
@@ -443,6 +484,10 @@ class MappingConfig:
     ``every`` frames, mapped with a window of earlier ones)."""
     every: int = 4
     """Map every k-th frame (plus the last); every mapped frame becomes a keyframe."""
+    keyframe_coverage: float = 0.0
+    """Also make a tracked frame a keyframe when less than this share of its pixels lay
+    in observed space (needs ``tracking.observed_only``, which measures the share): the
+    map grows as fast as a turning camera brings new space into view. 0 = off."""
     window: int = 20
     """Keyframes optimised together: current, two latest, the rest drawn from the list."""
     selection: Literal["random", "overlap", "recent"] = "random"
@@ -494,6 +539,8 @@ class MappingConfig:
 
     def __post_init__(self) -> None:
         _at_least(self, "every", 1)
+        if not 0 <= self.keyframe_coverage < 1:
+            raise ValueError(f"keyframe_coverage must be in [0, 1), got {self.keyframe_coverage}")
         _at_least(self, "window", 3)
         _at_least(self, "rays", 1)
         _at_least(self, "iterations", 0)
@@ -616,5 +663,10 @@ class ESLAMConfig:
             raise ValueError(f"seed must be >= 0, got {self.seed}")
         if self.threads < 0:
             raise ValueError(f"threads must be >= 0 (0 = torch's default), got {self.threads}")
+        if self.mapping.keyframe_coverage > 0 and not self.tracking.observed_only:
+            raise ValueError(
+                "mapping.keyframe_coverage needs tracking.observed_only=true (which measures"
+                " the share of a frame in observed space); set it, or keyframe_coverage=0"
+            )
         if not re.fullmatch(r"auto|cpu|mps|cuda(:\d+)?", self.device):
             raise ValueError(f"device must be auto, cpu, cuda, cuda:N or mps, got '{self.device}'")

@@ -33,6 +33,8 @@ METRICS: tuple[tuple[str, str, str], ...] = (
     ("tracking_failures", "Frames whose tracking failed", ""),
     ("tracking_failed_longest_run", "Longest run of failed frames", ""),
     ("tracking_ended_tracked", "Run ended tracked", ""),
+    ("tracking_recovered_frames", "Frames recovered after a failed try", ""),
+    ("tracking_relocalisations", "Relocalisations (frame from keyframe frame)", ""),
     ("tracking_degenerate_frames", "Frames with a degenerate view", ""),
     ("peak_memory_mb", "Peak memory", "MB"),
     ("frames", "Frames", ""),
@@ -42,6 +44,12 @@ METRICS: tuple[tuple[str, str, str], ...] = (
 
 
 def _shown(value: object) -> str:
+    if isinstance(value, dict):
+        return ", ".join(f"{key} {_shown(item)}" for key, item in value.items())
+    if isinstance(value, list):  # relocalisations: {"frame": i, "keyframe": k}
+        return f"{len(value)}" + "".join(
+            f"; {item['frame']} from {item['keyframe']}" for item in value if isinstance(item, dict)
+        )
     if isinstance(value, bool) or not isinstance(value, int | float):
         return str(value)
     if isinstance(value, int):

@@ -29,7 +29,7 @@ from eslam.io.checkpoint import load_checkpoint, save_checkpoint
 from eslam.mesh.observed import ObservedViews
 from eslam.slam.mapping.keyframes import KeyframeStore
 from eslam.slam.mapping.windows import WindowStrategy, make_window_strategy
-from eslam.slam.tracking.base import TrackingQuality
+from eslam.slam.tracking.base import RECOVERIES, TrackingQuality
 from eslam.slam.trajectory import Trajectory
 from eslam.types import Intrinsics
 
@@ -135,10 +135,14 @@ TRACKING_COLUMNS = (
     "tracking_failed",
     "tracking_information",
     "tracking_degenerate_directions",
+    "tracking_recovery",
+    "tracking_recovered_from",
 )
 """The columns of :attr:`SLAMState.tracking_quality` (the fields of
-:class:`~eslam.slam.tracking.base.TrackingQuality`; failed as 1/0), also the names of
-timings.json's per-frame lists."""
+:class:`~eslam.slam.tracking.base.TrackingQuality`; failed as 1/0; recovery as 0 when
+the first try passed or nothing recovered the frame, else 1 + its place in
+:data:`~eslam.slam.tracking.base.RECOVERIES`), also the names of timings.json's
+per-frame lists."""
 
 
 def quality_row(quality: TrackingQuality | None) -> list[float]:
@@ -152,16 +156,37 @@ def quality_row(quality: TrackingQuality | None) -> list[float]:
         float(quality.failed),
         quality.information,
         float("nan") if quality.degenerate_directions is None else quality.degenerate_directions,
+        0.0 if quality.recovery is None else 1.0 + RECOVERIES.index(quality.recovery),
+        float("nan") if quality.recovered_from is None else float(quality.recovered_from),
     ]
 
 
 _FAILED = TRACKING_COLUMNS.index("tracking_failed")
+_RECOVERY = TRACKING_COLUMNS.index("tracking_recovery")
+_RECOVERED_FROM = TRACKING_COLUMNS.index("tracking_recovered_from")
 _DEGENERATE = TRACKING_COLUMNS.index("tracking_degenerate_directions")
 
 
 def failed_row(row: list[float]) -> bool:
     """Whether a quality row is a frame its tracker judged failed."""
     return row[_FAILED] == 1
+
+
+def untracked_row(row: list[float]) -> bool:
+    """Whether a quality row is a frame with no judgement (no depth, emptied by a view
+    filter, frame 0, or a tracker that does not judge itself)."""
+    return row[_FAILED] != row[_FAILED]  # NaN
+
+
+def recovery_of(row: list[float]) -> tuple[str, int | None] | None:
+    """How a quality row's frame was recovered and from which keyframe's frame
+    (:data:`~eslam.slam.tracking.base.RECOVERIES`), or None (not recovered, not judged,
+    or a map saved before recovery existed)."""
+    code = row[_RECOVERY]
+    if not code >= 1:  # NaN: not judged
+        return None
+    source = row[_RECOVERED_FROM]
+    return RECOVERIES[int(code) - 1], (int(source) if source == source else None)
 
 
 def degenerate_row(row: list[float]) -> bool:

@@ -229,7 +229,10 @@ def test_a_failed_frame_keeps_the_prediction_and_is_no_keyframe(
     tiny_sequence: Path, tmp_path: Path, register
 ) -> None:
     register(TRACKERS, "flaky", FailsEveryOther)
-    config = tiny_config(tiny_sequence, "output.mesh=false", "mapping.every=1")
+    # recovery off: this is what a failed frame is when nothing recovers it
+    config = tiny_config(
+        tiny_sequence, "output.mesh=false", "mapping.every=1", "tracking.recovery.enabled=false"
+    )
     config = dataclasses.replace(
         config, tracking=dataclasses.replace(config.tracking, method="flaky")
     )

@@ -2,7 +2,10 @@
 
 :class:`KeyframeBackEnd` (``mapping.back_end: keyframes``, the paper's) builds the
 field from the first frame with depth (when ``scene.bound`` is not set), makes every
-``mapping.every``-th tracked frame a keyframe, grows the bound to hold its depth
+``mapping.every``-th tracked frame a keyframe (and every frame the front end recovered
+after a failed try, :mod:`eslam.slam.tracking.recovery`, and with
+``mapping.keyframe_coverage`` every frame with less than that share in observed space,
+so that the map grows into what the camera turned to), grows the bound to hold its depth
 (:func:`~eslam.slam.mapping.bounds_policy.cover_keyframe`), chooses the window
 (``mapping.selection``), keeps the window's oldest keyframe fixed, and runs the mapper
 (eager, or CUDA-graphed with ``compute.cuda_graphs``:
@@ -96,13 +99,22 @@ class KeyframeBackEnd:
             check_some_depth(index, total, len(state.keyframes), self.context.source)
         if state.field is None:
             self._create_field(frame, index, tracked.has_depth, state)
-        mapped = not tracked.failed and self.schedule.is_keyframe(
-            index, tracked.has_depth, len(state.keyframes)
+        mapped = not tracked.failed and (
+            tracked.recovered
+            or self.schedule.is_keyframe(index, tracked.has_depth, len(state.keyframes))
+            or self.new_space(tracked)
         )
         if mapped:
             self.map_frame(frame, index, state)
         state.last_mapped = mapped or tracked.failed or not tracked.has_depth
         return mapped
+
+    def new_space(self, tracked: TrackedFrame) -> bool:
+        """Whether less than ``mapping.keyframe_coverage`` of the tracked frame lay in
+        observed space (the front end measures it with ``tracking.observed_only``)."""
+        coverage = self.context.config.mapping.keyframe_coverage
+        share = tracked.observed_share
+        return tracked.tracked and share is not None and share < coverage
 
     def finish(self, state: SLAMState, last: Frame | None) -> None:
         if state.last_mapped:

@@ -1,6 +1,6 @@
 """What a frame's tracking says in the run's log: frames without depth, failed frames
-and where a run of them ends, frames a view filter emptied, and where a stretch of
-degenerate views begins and ends.
+and where a run of them ends, frames the recovery found after a failed try (and how),
+frames a view filter emptied, and where a stretch of degenerate views begins and ends.
 
 :class:`FrameLogObserver` reads each :class:`~eslam.slam.run.observers.FrameDone`; the
 front end and the loop only report. A resumed run picks up a degenerate stretch where
@@ -13,6 +13,7 @@ import logging
 
 from eslam.slam.run.observers import FrameDone, RunObserverBase, RunStart
 from eslam.slam.state import degenerate_row, degenerate_stretch, failed_stretch, quality_row
+from eslam.slam.tracking.base import TrackingQuality
 
 
 class FrameLogObserver(RunObserverBase):
@@ -53,8 +54,28 @@ class FrameLogObserver(RunObserverBase):
                 100.0 * quality.inlier_fraction,
                 1000.0 * quality.residual_m,
             )
+        if quality is not None and quality.recovery is not None:
+            self._recovered(frame.index, quality)
         self._loss(frame)
         self._degeneracy(frame.index, frame)
+
+    def _recovered(self, index: int, quality: TrackingQuality) -> None:
+        """Say how the recovery found a frame the first try failed."""
+        how = {
+            "start": "from the last pose held still"
+            if quality.recovered_from is None
+            else f"from the pose of keyframe frame {quality.recovered_from}",
+            "relocalised": f"relocalised at keyframe frame {quality.recovered_from}",
+        }[quality.recovery or ""]
+        log = self.log.warning if quality.recovery == "relocalised" else self.log.info
+        log(
+            "frame %d: the first try failed; tracked %s (%.0f%% inliers, residual %.1f mm),"
+            " made a keyframe",
+            index,
+            how,
+            100.0 * quality.inlier_fraction,
+            1000.0 * quality.residual_m,
+        )
 
     def _loss(self, frame: FrameDone) -> None:
         """Log where a run of failed frames ends (the camera is tracked again)."""

@@ -42,8 +42,10 @@ from eslam.slam.state import (
     SLAMState,
     degenerate_row,
     longest_failed_run,
+    recovery_of,
     save_state,
 )
+from eslam.slam.tracking.base import RECOVERIES
 
 
 @dataclass(frozen=True)
@@ -92,6 +94,23 @@ def quality_columns(state: SLAMState) -> dict[str, np.ndarray]:
     return dict(zip(TRACKING_COLUMNS, rows.T, strict=True))
 
 
+def recovery_metrics(rows: list[list[float]]) -> dict:
+    """metrics.json's recovery figures from the quality rows: frames recovered after a
+    failed first try, by how (:data:`~eslam.slam.tracking.base.RECOVERIES`), and every
+    relocalisation with the frame index of the keyframe it came from."""
+    recoveries = [(frame, found) for frame, row in enumerate(rows) if (found := recovery_of(row))]
+    return {
+        "tracking_recovered_frames": {
+            how: sum(1 for _, (kind, _) in recoveries if kind == how) for how in RECOVERIES
+        },
+        "tracking_relocalisations": [
+            {"frame": frame, "keyframe": source}
+            for frame, (kind, source) in recoveries
+            if kind == "relocalised"
+        ],
+    }
+
+
 def run_metrics(state: SLAMState, device: str, peak_memory_mb: float) -> dict:
     """metrics.json of a run: frames, device, FPT, peak memory, with a self-judging tracker
     the failed frames, the longest run of them, whether the last judged frame was tracked
@@ -117,6 +136,7 @@ def run_metrics(state: SLAMState, device: str, peak_memory_mb: float) -> dict:
         metrics["tracking_failed_longest_run"] = longest_failed_run(state.tracking_quality)
         metrics["tracking_ended_tracked"] = not bool(failed[judged][-1])
         metrics["tracking_iterations_mean"] = float(quality["tracking_iterations"][judged].mean())
+        metrics.update(recovery_metrics(state.tracking_quality))
     if np.isfinite(quality["tracking_degenerate_directions"]).any():  # the test ran
         metrics["tracking_degenerate_frames"] = sum(map(degenerate_row, state.tracking_quality))
     gt = state.trajectory.gt_poses()

@@ -1,17 +1,25 @@
 """What every tracker shares: its answer (:class:`TrackingResult`), its judgement of a
-frame (:class:`TrackingQuality`) and the protocol a tracker implements
-(:class:`Tracker`). Trackers are registered by name in
+frame (:class:`TrackingQuality`), the protocol a tracker implements (:class:`Tracker`)
+and how the run takes an answer (:func:`judged`). Trackers are registered by name in
 :data:`eslam.slam.tracking.trackers.TRACKERS`."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Protocol
+from typing import Literal, Protocol
 
 import torch
 
 from eslam.render.renderer import SceneFieldLike
 from eslam.slam.views import View
+
+Recovery = Literal["start", "relocalised"]
+"""How the front end recovered a frame its tracker failed
+(:mod:`eslam.slam.tracking.recovery`): tracked from another starting pose, or
+relocalised at a keyframe that looks alike."""
+
+RECOVERIES: tuple[Recovery, ...] = ("start", "relocalised")
+"""Every :data:`Recovery`, in the order they are tried."""
 
 
 @dataclass(frozen=True)
@@ -30,6 +38,11 @@ class TrackingQuality:
         degenerate_directions: pose directions below the tracker's degeneracy threshold
             (along them the pose is the motion model's, not measured); None when the
             tracker has no such test or it is off.
+        recovery: how the front end recovered the frame after the tracker failed it
+            from the motion model's guess (the figures above are the recovered try's),
+            None when the first try passed (or nothing recovered it).
+        recovered_from: the frame index of the keyframe whose pose the recovered try
+            started from (``start`` from a keyframe, ``relocalised``), else None.
     """
 
     iterations: int
@@ -38,6 +51,8 @@ class TrackingQuality:
     failed: bool
     information: float = float("nan")
     degenerate_directions: int | None = None
+    recovery: Recovery | None = None
+    recovered_from: int | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -68,3 +83,21 @@ class Tracker(Protocol):
     ) -> TrackingResult:
         """Pose of ``view`` (the frame's images on the device), starting at ``initial_pose``."""
         ...
+
+
+def judged(
+    result: TrackingResult, guess: torch.Tensor
+) -> tuple[torch.Tensor, TrackingQuality | None]:
+    """A tracker's answer as the run takes it: (pose, quality). A non-finite pose is a
+    failure; a failed frame keeps ``guess`` (reads the device once)."""
+    quality = result.quality
+    if not bool(torch.isfinite(result.pose).all()):
+        quality = non_finite_quality(quality)
+    pose = guess if quality is not None and quality.failed else result.pose
+    return pose, quality
+
+
+def non_finite_quality(quality: TrackingQuality | None) -> TrackingQuality:
+    """The judgement of a frame whose tracker returned a non-finite pose: failed."""
+    iterations = 0 if quality is None else quality.iterations
+    return TrackingQuality(iterations, 0.0, float("inf"), failed=True)

@@ -4,27 +4,31 @@
 the motion model's guess (:func:`~eslam.slam.tracking.trackers.predict_pose`), applies its view
 filters (:mod:`eslam.slam.tracking.view_filters`), runs the tracker (``tracking.method``, from
 :data:`~eslam.slam.tracking.trackers.TRACKERS`) and judges the result: a failed frame (the
-tracker said so, or its pose is not finite) keeps the guess. The run loop appends the
-answer, a :class:`TrackedFrame`, to the trajectory; observers report it.
+tracker said so, or its pose is not finite; after a failed or untracked frame, also one
+short of the recovery's inlier share) goes to the recovery
+(:mod:`eslam.slam.tracking.recovery`: other starting poses, relocalisation),
+and keeps the guess when nothing passes. The run loop appends the answer, a
+:class:`TrackedFrame`, to the trajectory; observers report it.
 
-The front end keeps no state of its own between frames: whether the last frame failed
-(after which the motion model holds still) is read from the run's quality rows, which
-are checkpointed, so a run resumed right after a failed frame predicts its next frame
-exactly as the uninterrupted run does.
+The front end keeps no state of its own between frames: whether the last two frames
+failed or the last was recovered (then the motion model holds still) is read from the
+run's quality rows, which are checkpointed, so a run resumed right after a failed
+frame predicts its next frame exactly as the uninterrupted run does.
 """
 
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Protocol
 
 import torch
 
 from eslam.slam.context import RunContext
 from eslam.slam.mapping.bounds_policy import first_pose
-from eslam.slam.state import SLAMState, failed_row
-from eslam.slam.tracking.base import Tracker, TrackingQuality, TrackingResult
+from eslam.slam.state import SLAMState, failed_row, recovery_of
+from eslam.slam.tracking.base import Tracker, TrackingQuality, judged
+from eslam.slam.tracking.recovery import Recovery
 from eslam.slam.tracking.trackers import make_tracker, motion_guess
 from eslam.slam.tracking.view_filters import ViewFilter, make_filters
 from eslam.slam.views import View, make_view, restrict_view, upload_frame
@@ -43,6 +47,8 @@ class TrackedFrame:
         emptied_by: why a view filter left no pixel to track on, in its words
             (:attr:`~eslam.slam.tracking.view_filters.ViewFilter.emptied`; the frame
             keeps the guess), else None.
+        observed_share: with the ``observed`` view filter, the share of the frame's
+            sampleable pixels it kept (in observed space at the guess), else None.
     """
 
     pose: torch.Tensor
@@ -50,11 +56,18 @@ class TrackedFrame:
     tracked: bool = False
     quality: TrackingQuality | None = None
     emptied_by: str | None = None
+    observed_share: float | None = None
 
     @property
     def failed(self) -> bool:
         """Whether the tracker judged the frame failed (it keeps the guess, is no keyframe)."""
         return self.quality is not None and self.quality.failed
+
+    @property
+    def recovered(self) -> bool:
+        """Whether the recovery found the pose after the first try failed (the back end
+        makes such a frame a keyframe)."""
+        return self.quality is not None and self.quality.recovery is not None
 
 
 class FrontEnd(Protocol):
@@ -72,6 +85,8 @@ class TrackingFrontEnd:
         context: the run.
         tracker: the tracker (default: ``tracking.method``'s).
         filters: the view filters (default: those the config turns on).
+        recovery: what is tried after a failed frame (default: ``tracking.recovery``'s,
+            None when it is off).
     """
 
     def __init__(
@@ -79,10 +94,14 @@ class TrackingFrontEnd:
         context: RunContext,
         tracker: Tracker | None = None,
         filters: list[ViewFilter] | None = None,
+        recovery: Recovery | None = None,
     ) -> None:
         self.context = context
         self.tracker = make_tracker(context.config) if tracker is None else tracker
         self.filters = make_filters(context) if filters is None else list(filters)
+        if recovery is None and context.config.tracking.recovery.enabled:
+            recovery = Recovery(context, self.tracker)
+        self.recovery = recovery
 
     @property
     def log(self) -> logging.Logger:
@@ -96,24 +115,40 @@ class TrackingFrontEnd:
         guess = self.guess(state)
         if not has_depth or state.field is None or len(state.keyframes) == 0:
             return TrackedFrame(guess, has_depth)
-        view = self.view(frame)
+        whole = view = self.view(frame)
+        share = None
         for view_filter in self.filters:
             restricted = restrict_view(view, view_filter.keep(view, guess, state))
-            if restricted.sampleable_pixels() == 0 and view.sampleable_pixels() > 0:
+            kept, before = restricted.sampleable_pixels(), view.sampleable_pixels()
+            if view_filter.name == "observed":
+                share = kept / max(before, 1)
+            if kept == 0 and before > 0:
                 return TrackedFrame(guess, has_depth, emptied_by=view_filter.emptied)
             view = restricted
         if view.sampleable_pixels() == 0:
             return TrackedFrame(guess, has_depth)
         result = self.tracker.track(state.field, view, guess, state.generator)
         pose, quality = judged(result, guess)
-        return TrackedFrame(pose, has_depth, tracked=True, quality=quality)
+        recovery = self.recovery
+        if recovery is not None and quality is not None:
+            if not quality.failed and recovery.doubts(state) and not recovery.passes(quality):
+                pose, quality = guess, replace(quality, failed=True)
+            if quality.failed:
+                found = recovery.recover(frame, whole, guess, state)
+                if found is not None:
+                    pose, quality = found.pose, found.quality
+        return TrackedFrame(pose, has_depth, True, quality, observed_share=share)
 
     def guess(self, state: SLAMState) -> torch.Tensor:
         """The motion model's pose for the next frame of ``state``
-        (:func:`~eslam.slam.tracking.trackers.motion_guess`; whether the last frame failed is
-        read from its quality row)."""
+        (:func:`~eslam.slam.tracking.trackers.motion_guess`): it holds still when either of
+        the last two frames failed or the last was recovered: the velocity would then
+        end or start at a guess, or be a jump back onto the track, not motion; read from
+        the quality rows."""
         rows = state.tracking_quality
-        after_failure = bool(rows) and failed_row(rows[-1])
+        after_failure = any(failed_row(row) for row in rows[-2:]) or (
+            bool(rows) and recovery_of(rows[-1]) is not None
+        )
         constant_velocity = self.context.config.tracking.constant_velocity
         return motion_guess(state.trajectory.poses, constant_velocity, after_failure)
 
@@ -122,21 +157,3 @@ class TrackingFrontEnd:
         rgb, depth = upload_frame(frame.rgb, frame.depth, self.context.device)
         border = self.context.config.tracking.border
         return make_view(rgb, depth, self.context.directions, border)
-
-
-def judged(
-    result: TrackingResult, guess: torch.Tensor
-) -> tuple[torch.Tensor, TrackingQuality | None]:
-    """A tracker's answer as the run takes it: (pose, quality). A non-finite pose is a
-    failure; a failed frame keeps ``guess`` (reads the device once)."""
-    quality = result.quality
-    if not bool(torch.isfinite(result.pose).all()):
-        quality = non_finite_quality(quality)
-    pose = guess if quality is not None and quality.failed else result.pose
-    return pose, quality
-
-
-def non_finite_quality(quality: TrackingQuality | None) -> TrackingQuality:
-    """The judgement of a frame whose tracker returned a non-finite pose: failed."""
-    iterations = 0 if quality is None else quality.iterations
-    return TrackingQuality(iterations, 0.0, float("inf"), failed=True)
