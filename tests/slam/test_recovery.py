@@ -19,7 +19,7 @@ from eslam.errors import ConfigError
 from eslam.evaluate.report import metrics_table
 from eslam.slam.places.features import mutual_matches, orb_features, rigid_pose, thumbnail
 from eslam.slam.run.writer import recovery_metrics
-from eslam.slam.session import run_slam
+from eslam.slam.session import RunResult, run_slam
 from eslam.slam.state import TRACKING_COLUMNS, quality_row, recovery_of
 from eslam.slam.tracking.base import TrackingQuality
 from eslam.synthetic import (
@@ -54,7 +54,7 @@ def lossy(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return write_edited_sequence(out, ROOM, SequenceEdit(ORDER, BLIND_AT))
 
 
-def run(data: Path, out: Path, *extra: str) -> dict:
+def run(data: Path, out: Path, *extra: str) -> RunResult:
     config = load_config(
         DEMO_CONFIG,
         [
@@ -65,7 +65,7 @@ def run(data: Path, out: Path, *extra: str) -> dict:
             *extra,
         ],
     )
-    return run_slam(config, out).metrics
+    return run_slam(config, out)
 
 
 def errors_cm(run_dir: Path) -> np.ndarray:
@@ -88,7 +88,8 @@ def test_a_lost_camera_comes_back_within_a_centimetre(
     """Back at a mapped place after the blind stretch: a failed frame or two, then the
     recovery (by default whichever try passes first; with no keyframe starts, by
     relocalisation) puts the camera back, within 1 cm of the truth from then on."""
-    metrics = run(lossy, tmp_path / "run", *settings)
+    result = run(lossy, tmp_path / "run", *settings)
+    metrics = result.metrics
     back = BACK
     timings = json.loads((tmp_path / "run" / "timings.json").read_text())
     recovered = [i for i, code in enumerate(timings["tracking_recovery"]) if code and code > 0]
@@ -105,12 +106,20 @@ def test_a_lost_camera_comes_back_within_a_centimetre(
         assert relocalised[0]["keyframe"] < MAPPED
         log = (tmp_path / "run" / "log.txt").read_text()
         assert f"frame {first}: the first try failed; tracked relocalised at keyframe" in log
+        # stopped right after the relocalisation, resumed: the same run (the place index
+        # is rebuilt from the keyframes' images, the motion model reads the rows)
+        stopped = tmp_path / "stopped"
+        config = load_config(tmp_path / "run" / "config.yaml")
+        run_slam(config, stopped, stop_after=first + 1)
+        resumed = run_slam(load_config(stopped / "config.yaml"), stopped, resume=True)
+        np.testing.assert_allclose(resumed.poses, result.poses, rtol=0, atol=1e-7)
+        assert resumed.metrics["tracking_relocalisations"] == relocalised
 
 
 @pytest.mark.slow
 def test_without_recovery_the_same_loss_is_for_good(lossy: Path, tmp_path: Path) -> None:
     """The yardstick of the test above: the motion model alone does not come back."""
-    metrics = run(lossy, tmp_path / "run", "tracking.recovery.enabled=false")
+    metrics = run(lossy, tmp_path / "run", "tracking.recovery.enabled=false").metrics
     assert "tracking_relocalisations" in metrics and not metrics["tracking_relocalisations"]
     assert errors_cm(tmp_path / "run")[BACK:].min() > 5.0
 
@@ -122,7 +131,7 @@ def test_a_place_that_looks_alike_is_refused(tmp_path: Path) -> None:
     foreign = frozenset(range(BACK, len(ORDER)))
     edit = SequenceEdit(ORDER, BLIND_AT, foreign=foreign, foreign_seed=1)
     data = write_edited_sequence(tmp_path / "alike", ROOM, edit)
-    metrics = run(data, tmp_path / "run")
+    metrics = run(data, tmp_path / "run").metrics
     assert metrics["tracking_relocalisations"] == []
     log = (tmp_path / "run" / "log.txt").read_text()
     assert "looks like keyframe frame" in log and "refused" in log
