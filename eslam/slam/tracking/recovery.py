@@ -144,7 +144,7 @@ class Recovery:
         return chosen
 
     def relocalise(self, frame: Frame, view: View, state: SLAMState) -> Recovered | None:
-        """Step 3 of the module doc: the most alike keyframes, verified by tracking
+        """Step 2 of the module doc: the most alike keyframes, verified by tracking
         (each refused candidate is logged)."""
         store = state.keyframes
         if self._places is None or self._places.store is not store:
