@@ -40,9 +40,8 @@ def row(name: str, run_dir: Path, back: int, metrics: dict) -> str:
     estimate = np.loadtxt(run_dir / "trajectory.txt")
     truth = np.loadtxt(run_dir / "trajectory_gt.txt")
     errors = 100.0 * np.linalg.norm(estimate[:, 1:4] - truth[:, 1:4], axis=1)
-    codes = json.loads((run_dir / "timings.json").read_text())["tracking_recovery"]
     failed = json.loads((run_dir / "timings.json").read_text())["tracking_failed"]
-    tracked = [i for i in range(back, len(codes)) if failed[i] == 0]
+    tracked = [i for i in range(back, len(failed)) if failed[i] == 0]
     first = tracked[0] if tracked else None
     after = f"{errors[first:].max():.2f} cm" if first is not None else "-"
     recovered = metrics["tracking_recovered_frames"]

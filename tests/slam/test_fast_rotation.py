@@ -10,26 +10,17 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from eslam.config import load_config
 from eslam.evaluate.trajectory import absolute_trajectory_error, relative_pose_error
 from eslam.slam.session import run_slam
-from eslam.synthetic import SynthConfig, read_synthetic_bound, write_synthetic_sequence
-from eslam.workflows.demo import DEMO_CONFIG
+from eslam.synthetic import SynthConfig, write_synthetic_sequence
+from tests.conftest import demo_config
 
 
 @pytest.mark.slow
 def test_a_fast_yaw_is_tracked_without_a_failed_frame(tmp_path: Path) -> None:
     room = SynthConfig(frames=16, width=120, height=90, seed=0, step_rotation_deg=4.0)
     data = write_synthetic_sequence(tmp_path / "room", room)
-    config = load_config(
-        DEMO_CONFIG,
-        [
-            f"data.path={data}",
-            f"scene.bound={read_synthetic_bound(data)}",
-            "output.mesh=false",
-            "output.progress=false",
-        ],
-    )
+    config = demo_config(data)
     result = run_slam(config, tmp_path / "run")
     metrics = result.metrics
     assert metrics["tracking_failures"] == 0

@@ -25,12 +25,12 @@ from eslam.slam.tracking.base import TrackingQuality
 from eslam.synthetic import (
     SynthConfig,
     SyntheticSequence,
-    read_synthetic_bound,
     write_synthetic_sequence,
 )
 from eslam.synthetic.edits import SequenceEdit, return_after_blind, write_edited_sequence
 from eslam.types import Intrinsics
 from eslam.workflows.demo import DEMO_CONFIG
+from tests.conftest import demo_config
 
 SIZE = (120, 90)
 ROOM = SynthConfig(frames=15, width=SIZE[0], height=SIZE[1], seed=0, step_rotation_deg=2.0)
@@ -55,17 +55,7 @@ def lossy(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 def run(data: Path, out: Path, *extra: str) -> RunResult:
-    config = load_config(
-        DEMO_CONFIG,
-        [
-            f"data.path={data}",
-            f"scene.bound={read_synthetic_bound(data)}",
-            "output.mesh=false",
-            "output.progress=false",
-            *extra,
-        ],
-    )
-    return run_slam(config, out)
+    return run_slam(demo_config(data, *extra), out)
 
 
 def errors_cm(run_dir: Path) -> np.ndarray:

@@ -113,7 +113,7 @@ class KeyframeBackEnd:
         """Whether less than ``mapping.keyframe_coverage`` of the tracked frame lay in
         observed space (the front end measures it with ``tracking.observed_only``)."""
         coverage = self.context.config.mapping.keyframe_coverage
-        share = tracked.observed_share
+        share = tracked.kept.get("observed")
         return tracked.tracked and share is not None and share < coverage
 
     def finish(self, state: SLAMState, last: Frame | None) -> None:

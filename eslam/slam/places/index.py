@@ -46,13 +46,11 @@ class PlaceMatch:
 
     Attributes:
         keyframe: its keyframe id in the store.
-        similarity: the global descriptors' correlation (1 = alike).
         pose: (4, 4) float64 camera-to-world of the query from the matches.
         inliers: matches that agree on ``pose``.
     """
 
     keyframe: int
-    similarity: float
     pose: np.ndarray
     inliers: int
 
@@ -68,30 +66,28 @@ class PlaceIndex:
         self.store = store
         self._places: list[tuple[int, Place]] = []  # (frame index, place) by keyframe id
 
-    def place(self, k: int) -> Place:
-        """Keyframe ``k`` as a place (described on first use; a keyframe id reused by
-        another frame after a rollback is described again)."""
+    def places(self) -> list[Place]:
+        """Every keyframe of the store as a place, by keyframe id: each described on
+        first use; entries whose keyframe id now holds another frame (after a
+        rollback) are dropped and described again."""
         frames = self.store.frame_indices
-        del self._places[len(frames) :]
-        for stale, (frame, _) in enumerate(self._places):
-            if frame != frames[stale]:
-                del self._places[stale:]
-                break
-        while len(self._places) <= k:
-            j = len(self._places)
+        kept = 0
+        while kept < min(len(frames), len(self._places)) and self._places[kept][0] == frames[kept]:
+            kept += 1
+        del self._places[kept:]
+        for j in range(kept, len(frames)):
             rgb = (self.store.rgb(j, "cpu") * 255.0).round().to(torch.uint8).numpy()
             depth = self.store.depth(j, "cpu").numpy()
             self._places.append((frames[j], describe(rgb, depth, self.store)))
-        return self._places[k][1]
+        return [place for _, place in self._places]
 
     def alike(self, query: Place, count: int) -> list[tuple[int, float]]:
         """The ``count`` keyframes whose global descriptors correlate most with
         ``query``'s: (keyframe id, similarity), most alike first (ties: older first)."""
-        total = len(self.store)
-        if total == 0:
+        places = self.places()
+        if not places:
             return []
-        descriptors = [self.place(k).descriptor for k in range(total)]
-        scores = np.array([float(d @ query.descriptor) for d in descriptors])
+        scores = np.stack([place.descriptor for place in places]) @ query.descriptor
         order = np.argsort(-scores, kind="stable")[:count]
         return [(int(k), float(scores[k])) for k in order]
 
@@ -100,7 +96,7 @@ class PlaceIndex:
         matched to the keyframe's, both with depth (the keyframe's placed with its pose
         now), give the pose by a rigid fit in RANSAC; None without ``min_inliers``
         agreeing matches."""
-        place = self.place(k)
+        place = self.places()[k]
         pairs = mutual_matches(query.features.descriptors, place.features.descriptors)
         if len(pairs) == 0:
             return None
@@ -113,5 +109,4 @@ class PlaceIndex:
         found = rigid_pose(camera[usable].astype(np.float64), world, min_inliers, seed)
         if found is None:
             return None
-        similarity = float(place.descriptor @ query.descriptor)
-        return PlaceMatch(k, similarity, found.pose, found.inliers)
+        return PlaceMatch(k, found.pose, found.inliers)

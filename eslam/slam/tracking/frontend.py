@@ -19,7 +19,8 @@ frame predicts its next frame exactly as the uninterrupted run does.
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass, replace
+from collections.abc import Mapping
+from dataclasses import dataclass, field, replace
 from typing import Protocol
 
 import torch
@@ -47,8 +48,8 @@ class TrackedFrame:
         emptied_by: why a view filter left no pixel to track on, in its words
             (:attr:`~eslam.slam.tracking.view_filters.ViewFilter.emptied`; the frame
             keeps the guess), else None.
-        observed_share: with the ``observed`` view filter, the share of the frame's
-            sampleable pixels it kept (in observed space at the guess), else None.
+        kept: by view filter name, the share of the pixels before it that it kept
+            (``observed``: the share of the frame in observed space at the guess).
     """
 
     pose: torch.Tensor
@@ -56,7 +57,7 @@ class TrackedFrame:
     tracked: bool = False
     quality: TrackingQuality | None = None
     emptied_by: str | None = None
-    observed_share: float | None = None
+    kept: Mapping[str, float] = field(default_factory=dict)
 
     @property
     def failed(self) -> bool:
@@ -116,14 +117,13 @@ class TrackingFrontEnd:
         if not has_depth or state.field is None or len(state.keyframes) == 0:
             return TrackedFrame(guess, has_depth)
         whole = view = self.view(frame)
-        share = None
+        kept: dict[str, float] = {}
         for view_filter in self.filters:
             restricted = restrict_view(view, view_filter.keep(view, guess, state))
-            kept, before = restricted.sampleable_pixels(), view.sampleable_pixels()
-            if view_filter.name == "observed":
-                share = kept / max(before, 1)
-            if kept == 0 and before > 0:
-                return TrackedFrame(guess, has_depth, emptied_by=view_filter.emptied)
+            left, before = restricted.sampleable_pixels(), view.sampleable_pixels()
+            kept[view_filter.name] = left / max(before, 1)
+            if left == 0 and before > 0:
+                return TrackedFrame(guess, has_depth, emptied_by=view_filter.emptied, kept=kept)
             view = restricted
         if view.sampleable_pixels() == 0:
             return TrackedFrame(guess, has_depth)
@@ -137,7 +137,7 @@ class TrackingFrontEnd:
                 found = recovery.recover(frame, whole, guess, state)
                 if found is not None:
                     pose, quality = found.pose, found.quality
-        return TrackedFrame(pose, has_depth, True, quality, observed_share=share)
+        return TrackedFrame(pose, has_depth, True, quality, kept=kept)
 
     def guess(self, state: SLAMState) -> torch.Tensor:
         """The motion model's pose for the next frame of ``state``
