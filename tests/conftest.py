@@ -26,6 +26,21 @@ if not torch.cuda.is_available():
     os.environ.setdefault("TRITON_INTERPRET", "1")
 
 
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Every test that skips without CUDA carries ``@pytest.mark.cuda`` too: the GPU
+    check (benchmarks/gpu_check.py) runs ``pytest -m cuda`` and must not miss one."""
+    unmarked = [
+        item.nodeid
+        for item in items
+        if item.get_closest_marker("cuda") is None
+        and any("CUDA" in str(m.kwargs.get("reason", "")) for m in item.iter_markers("skipif"))
+    ]
+    if unmarked:
+        raise pytest.UsageError(
+            "these tests skip without CUDA but lack @pytest.mark.cuda: " + ", ".join(unmarked)
+        )
+
+
 @pytest.fixture(scope="session")
 def real_data() -> Path:
     """The folder of real sequences (../shared/data), from ESLAM_TEST_DATA; skip when unset."""

@@ -159,6 +159,7 @@ def test_growth_with_one_level_and_shared_planes(levels: str) -> None:
     torch.testing.assert_close(field.query(points).sdf, before.sdf, rtol=0, atol=1e-6)
 
 
+@pytest.mark.cuda
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="no CUDA device")
 def test_growth_on_cuda_matches_cpu() -> None:
     cpu = _trained_like()

@@ -193,6 +193,7 @@ def test_double_precision():
     assert field.plane_parameters()[0].grad.dtype == torch.float64
 
 
+@pytest.mark.cuda
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="no CUDA device")
 def test_cuda_matches_cpu():
     field = _field()

@@ -27,7 +27,7 @@ from eslam.field.triton_sampling import check_device, sample_levels_triton
 from eslam.slam.session import run_slam
 
 CUDA = pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA device")
-DEVICES = ["cpu", pytest.param("cuda", marks=CUDA)]
+DEVICES = ["cpu", pytest.param("cuda", marks=[CUDA, pytest.mark.cuda])]
 
 GRIDS = [(5, 7, 9), (3, 4, 2)]
 """Two levels (nx, ny, nz); the second reads through a window."""
@@ -171,6 +171,7 @@ def test_field_with_triton_sampling_equals_reference_after_growth(kernels, devic
         torch.testing.assert_close(a, b, rtol=0, atol=1e-10)
 
 
+@pytest.mark.cuda
 def test_the_op_traces_under_torch_compile(kernels):
     """torch.compile (Dynamo + AOTAutograd, backend aot_eager: the trace, no C++ build)
     takes the op in one graph through its fake and autograd registrations."""

@@ -541,6 +541,7 @@ def test_batched_shapes() -> None:
     assert_close(pose, flat.numpy(), 0.0)
 
 
+@pytest.mark.cuda
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="no CUDA device")
 def test_cuda_device() -> None:
     xi = _twists("random")[:20].cuda()

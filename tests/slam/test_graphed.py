@@ -90,7 +90,7 @@ class ReplayEagerly:
         self.step(self.generator)
 
 
-@pytest.fixture(params=["cpu", pytest.param("cuda", marks=needs_cuda)])
+@pytest.fixture(params=["cpu", pytest.param("cuda", marks=[needs_cuda, pytest.mark.cuda])])
 def device(request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch) -> str:
     """cuda: real graphs; cpu: graphs switched on, the capture replaced (module doc)."""
     if request.param == "cpu":

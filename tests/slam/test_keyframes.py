@@ -21,7 +21,8 @@ from eslam.slam.trajectory import Trajectory
 from eslam.types import Frame, Intrinsics
 
 CAMERA = Intrinsics(width=32, height=24, fx=20.0, fy=20.0, cx=15.5, cy=11.5)
-DEVICES = ["cpu"] + (["cuda"] if torch.cuda.is_available() else [])
+NO_CUDA = pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA device")
+DEVICES = ["cpu", pytest.param("cuda", marks=[NO_CUDA, pytest.mark.cuda])]
 
 
 def _frame(index: int, seed: int = 0, depth: np.ndarray | None = None) -> Frame:

@@ -121,6 +121,7 @@ def test_sdf_tracking_reads_the_host_a_fixed_number_of_times_per_frame() -> None
     assert not torch.equal(poses[12], start)
 
 
+@pytest.mark.cuda
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="no CUDA device")
 @pytest.mark.parametrize("degeneracy", [0.0, 0.01])
 def test_the_sdf_tracking_step_does_not_sync_with_the_device(degeneracy: float) -> None:

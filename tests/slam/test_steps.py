@@ -120,6 +120,7 @@ def test_losses_compile_as_one_graph() -> None:
     assert torch.equal(eager_noisy, compiled_mapping(field, views, window, draws, noisy))
 
 
+@pytest.mark.cuda
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="no CUDA device")
 def test_steps_do_not_sync_with_the_device() -> None:
     config, field, view = _setup("cuda")
