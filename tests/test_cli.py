@@ -70,6 +70,8 @@ def test_no_command_is_one_line_error(capsys: pytest.CaptureFixture[str]) -> Non
         (["--frames", "0"], "expected a positive integer, got '0'"),
         (["--scene", "castle"], "invalid choice: 'castle'"),
         (["seed=3"], "unrecognized arguments: seed=3"),
+        (["--trajectory", "spiral"], "invalid choice: 'spiral'"),
+        (["--focal-error", "0.7"], "must be in (-0.5, 0.5), got 0.7"),
     ],
 )
 def test_synth_bad_arguments(

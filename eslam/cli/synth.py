@@ -11,6 +11,7 @@ from eslam.cli.args import image_size, positive_int
 def add(commands: argparse._SubParsersAction) -> None:
     """Add ``synth`` to ``commands``."""
     from eslam.synthetic import SCENES, SynthConfig
+    from eslam.synthetic.config import TRAJECTORIES
 
     defaults = SynthConfig()
     synth = commands.add_parser(
@@ -37,12 +38,38 @@ def add(commands: argparse._SubParsersAction) -> None:
     synth.add_argument(
         "--scene", choices=sorted(SCENES), default=defaults.scene, help="scene builder"
     )
+    synth.add_argument(
+        "--trajectory",
+        choices=TRAJECTORIES,
+        default=defaults.trajectory,
+        help="camera path: sway (hand-held-like) or loop (laps around the room: a "
+        "sequence longer than a lap returns to where it began)",
+    )
+    synth.add_argument(
+        "--focal-error",
+        type=focal_error,
+        default=defaults.focal_error,
+        metavar="E",
+        help="the frames report a focal length x (1 + E) (e.g. 0.01): odometry drifts, "
+        "the ground truth stays exact",
+    )
     synth.add_argument("--depth-noise", action="store_true", help="add sensor-like depth noise")
     synth.add_argument(
         "--missing-depth", action="store_true", help="drop depth like a sensor does (0 = invalid)"
     )
     synth.add_argument("--overwrite", action="store_true", help="replace OUT_DIR if it exists")
     synth.set_defaults(handler=handle)
+
+
+def focal_error(text: str) -> float:
+    """``--focal-error``: a float in (-0.5, 0.5)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: '{text}'") from None
+    if not -0.5 < value < 0.5:
+        raise argparse.ArgumentTypeError(f"must be in (-0.5, 0.5), got {value}")
+    return value
 
 
 def handle(args: argparse.Namespace) -> int:
@@ -56,6 +83,8 @@ def handle(args: argparse.Namespace) -> int:
         height=height,
         seed=args.seed,
         scene=args.scene,
+        trajectory=args.trajectory,
+        focal_error=args.focal_error,
         depth_noise=args.depth_noise,
         missing_depth=args.missing_depth,
     )

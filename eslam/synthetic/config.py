@@ -12,6 +12,10 @@ FPS = 30.0
 """Frame rate of the synthetic camera: timestamp = index / FPS seconds."""
 
 
+TRAJECTORIES = ("sway", "loop")
+"""The camera paths :func:`eslam.synthetic.trajectory.camera_trajectory` draws."""
+
+
 @dataclass(frozen=True)
 class SynthConfig:
     """What to generate; every field has a safe default."""
@@ -32,6 +36,14 @@ class SynthConfig:
     """Mean camera translation per frame, m (it varies by +-30 % along the way)."""
     step_rotation_deg: float = 0.5
     """Typical camera rotation per frame, degrees (yaw sweep plus pitch and roll sway)."""
+    trajectory: str = "sway"
+    """The camera path: ``sway`` (a hand-held-like Lissajous loop with a yaw sweep) or
+    ``loop`` (laps around the room looking outwards: a sequence longer than a lap
+    returns to the views it began with; :func:`eslam.synthetic.trajectory.loop_trajectory`)."""
+    focal_error: float = 0.0
+    """Relative error of the focal length the sequence reports: frames are rendered with
+    the true focal length but carry fx, fy x (1 + focal_error), so odometry drifts (it
+    turns too little or too much at every rotation) while the ground truth stays exact."""
     depth_noise: bool = False
     """Add Kinect-like axial noise, sigma(z) from sensor.KINECT_AXIAL_NOISE (seeded)."""
     missing_depth: bool = False
@@ -47,12 +59,21 @@ class SynthConfig:
             raise ValueError(f"hfov_deg must be in (1, 170), got {self.hfov_deg}")
         if self.step_translation <= 0 or self.step_rotation_deg <= 0:
             raise ValueError("step_translation and step_rotation_deg must be positive")
+        if self.trajectory not in TRAJECTORIES:
+            raise ValueError(
+                f"trajectory must be one of {', '.join(TRAJECTORIES)}, got '{self.trajectory}'"
+            )
+        if not -0.5 < self.focal_error < 0.5:
+            raise ValueError(f"focal_error must be in (-0.5, 0.5), got {self.focal_error}")
         scene_builder(self.scene)
 
 
-def synthetic_intrinsics(config: SynthConfig) -> Intrinsics:
-    """Pinhole intrinsics of the synthetic camera: fx = fy from hfov, centred principal point."""
+def synthetic_intrinsics(config: SynthConfig, reported: bool = False) -> Intrinsics:
+    """Pinhole intrinsics of the synthetic camera: fx = fy from hfov, centred principal
+    point; ``reported``: those the frames carry (the focal length x (1 + focal_error))."""
     focal = 0.5 * config.width / math.tan(math.radians(config.hfov_deg) / 2.0)
+    if reported:
+        focal *= 1.0 + config.focal_error
     return Intrinsics(
         config.width, config.height, focal, focal, (config.width - 1) / 2, (config.height - 1) / 2
     )

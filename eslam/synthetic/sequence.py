@@ -26,12 +26,12 @@ from eslam.types import Frame, Intrinsics
 def _render(
     scene: Scene, config: SynthConfig, pose: np.ndarray, index: int, timestamp: float
 ) -> Frame:
-    intrinsics = synthetic_intrinsics(config)
-    view = render_view(scene, intrinsics, pose)
+    view = render_view(scene, synthetic_intrinsics(config), pose)
     depth = view.depth
     if config.depth_noise or config.missing_depth:
         depth = sensor_depth(view, np.random.default_rng([config.seed, 2, index]), config)
-    return Frame(index, view.rgb, depth, intrinsics, pose.copy(), timestamp)
+    reported = synthetic_intrinsics(config, reported=True)
+    return Frame(index, view.rgb, depth, reported, pose.copy(), timestamp)
 
 
 def generate_sequence(config: SynthConfig) -> Iterator[Frame]:
@@ -62,7 +62,7 @@ class SyntheticSequence:
     def __init__(self, config: SynthConfig, root: str | Path | None = None) -> None:
         self.config = config
         self.scene = build_scene(config.scene, config.seed)
-        self.intrinsics: Intrinsics = synthetic_intrinsics(config)
+        self.intrinsics: Intrinsics = synthetic_intrinsics(config, reported=True)
         self.root = Path(root or f"synthetic-{config.scene}-seed{config.seed}")
         self._poses = camera_trajectory(self.scene, config)
 

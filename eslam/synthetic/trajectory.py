@@ -55,6 +55,57 @@ def _rate_for(amplitude: float, period: float) -> float:
 
 
 def camera_trajectory(scene: Scene, config: SynthConfig) -> np.ndarray:
+    """The camera-to-world poses (N, 4, 4) float64 of ``config.trajectory``:
+    :func:`sway_trajectory` or :func:`loop_trajectory`."""
+    if config.trajectory == "loop":
+        return loop_trajectory(scene, config)
+    return sway_trajectory(scene, config)
+
+
+LOOP_PITCH_DEG = 18.0
+"""Downward tilt of the loop's camera: it sees the walls and some floor."""
+
+
+def loop_lap_frames(scene: Scene, config: SynthConfig) -> int:
+    """Frames of one lap of :func:`loop_trajectory`: the ellipse's perimeter (Ramanujan's
+    approximation) over ``step_translation``."""
+    a, b = 0.9 * (scene.camera_hi[:2] - scene.camera_lo[:2]) / 2
+    h = ((a - b) / (a + b)) ** 2
+    perimeter = math.pi * (a + b) * (1 + 3 * h / (10 + math.sqrt(4 - 3 * h)))
+    return max(8, round(perimeter / config.step_translation))
+
+
+def loop_trajectory(scene: Scene, config: SynthConfig) -> np.ndarray:
+    """A lap around the room that comes back to its start, looking outwards.
+
+    The centre runs along an ellipse filling 90 % of the camera box's floor plan, at
+    ``step_translation`` per frame (one lap: :func:`loop_lap_frames`; frames past it go
+    round again, so a sequence longer than a lap returns to the views it began with),
+    at the box's mid height with a slow +-5 cm bob; the camera looks away from the
+    ellipse's centre, :data:`LOOP_PITCH_DEG` down, so its yaw turns a full circle per
+    lap. Frame i does not depend on ``config.frames``.
+    """
+    rng = np.random.default_rng([config.seed, 3])
+    lap = loop_lap_frames(scene, config)
+    centre = (scene.camera_lo + scene.camera_hi) / 2
+    a, b = 0.9 * (scene.camera_hi[:2] - scene.camera_lo[:2]) / 2
+    i = np.arange(config.frames, dtype=np.float64)
+    angle = rng.uniform(0.0, 2 * math.pi) + rng.choice([-1.0, 1.0]) * 2 * math.pi * i / lap
+    height = centre[2] + 0.05 * np.sin(2 * math.pi * i / 97.0)
+    positions = np.stack([centre[0] + a * np.cos(angle), centre[1] + b * np.sin(angle), height], 1)
+    pitch = -math.radians(LOOP_PITCH_DEG)
+    forward = np.stack(
+        [
+            math.cos(pitch) * np.cos(angle),
+            math.cos(pitch) * np.sin(angle),
+            np.full_like(i, math.sin(pitch)),
+        ],
+        axis=1,
+    )
+    return np.stack([look_at(p, p + 2.0 * f) for p, f in zip(positions, forward, strict=True)])
+
+
+def sway_trajectory(scene: Scene, config: SynthConfig) -> np.ndarray:
     """Smooth hand-held-like camera-to-world poses (N, 4, 4) float64 inside the camera box.
 
     The centre runs at ``step_translation`` (+-30 %, slowly varying) along a closed
