@@ -1,0 +1,1 @@
+"""Loop closure (global consistency): the pose graph over keyframes (:mod:`.pose_graph`)."""
