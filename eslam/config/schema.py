@@ -476,6 +476,87 @@ MOVED_KEYS = {
 
 
 @dataclass
+class LoopClosureConfig:
+    """Loop closure (eslam/slam/loops, docs/loops.md): after each keyframe's mapping call,
+    earlier keyframes that may see the same place are registered to it (projective ICP);
+    an accepted loop that disagrees with the estimate is closed by a pose graph (GTSAM,
+    the ``loops`` extra) and the map is fitted again at the corrected poses."""
+
+    enabled: bool = False
+    """Look for loops (off in the paper's configs)."""
+    min_keyframes_back: int = 50
+    """A candidate lies at least this many keyframes back ..."""
+    min_travel: float = 2.0
+    """... or at least this far back along the path, metres."""
+    min_overlap: float = 0.3
+    """A keyframe is a candidate by pose when at least this share of the new keyframe's
+    points, placed with the estimate, falls in its view."""
+    candidates: int = 2
+    """Candidates tried per keyframe by pose, and as many again by appearance (global
+    image descriptor, then ORB matches for a first relative pose)."""
+    min_inlier_fraction: float = 0.5
+    """Accept a registration only when this share of the new keyframe's points (with
+    depth) lands on the candidate's surface (within 2 cm, normals agreeing) ..."""
+    max_residual: float = 0.01
+    """... with an RMS point-to-plane residual of at most this, metres ..."""
+    min_eigenvalue: float = 0.001
+    """... and no direction left unconstrained (smallest eigenvalue of ICP's normal
+    equations per inlier; a flat wall gives about 0) ..."""
+    min_colour_agreement: float = 0.7
+    """... and this share of those points showing the candidate's colour there (grey
+    within 0.1 after removing the median difference: exposure): a box-shaped room fits
+    itself turned round, its texture does not."""
+    min_correction: float = 0.01
+    """A loop whose relative pose differs from the estimate's by less than this (metres)
+    and ``min_correction_deg`` is kept in the graph but closes nothing (no solve, no refit)."""
+    min_correction_deg: float = 0.5
+    """See ``min_correction``, degrees."""
+    odometry_sigma: tuple[float, float] = (0.002, 0.005)
+    """Pose-graph noise of the edge between consecutive keyframes: rotation (rad) and
+    translation (m) per component."""
+    loop_sigma: tuple[float, float] = (0.002, 0.005)
+    """The same for a loop edge."""
+    robust_k: float = 5.0
+    """Width of the loop edges' Cauchy kernel, in sigmas: a loop far outside it hardly
+    moves the graph (one false loop cannot bend the trajectory)."""
+    map: Literal["refit", "rebuild"] = "refit"
+    """How the map follows a correction: refit = ``refit_passes`` over every keyframe
+    at its corrected pose from the current field; rebuild = a new field, fitted with the
+    first frame's schedule on the first window, then the refit passes."""
+    refit_passes: int = 1
+    """Passes over every keyframe after a correction, poses held: mapping calls of
+    ``mapping.iterations`` steps on windows of ``mapping.window`` keyframes that together
+    hold each keyframe once per pass (in a shuffled order)."""
+    final_passes: int = 0
+    """At the end of the run, passes as ``refit_passes`` with every keyframe's pose
+    optimised too but the first's (a global refinement); 0 = off."""
+
+    def __post_init__(self) -> None:
+        self.odometry_sigma = _pair(self.odometry_sigma, "odometry_sigma")
+        self.loop_sigma = _pair(self.loop_sigma, "loop_sigma")
+        _at_least(self, "min_keyframes_back", 1)
+        _at_least(self, "candidates", 0)
+        _at_least(self, "refit_passes", 0)
+        _at_least(self, "final_passes", 0)
+        for name in ("min_travel", "max_residual", "robust_k"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")
+        for name in ("min_overlap", "min_inlier_fraction", "min_colour_agreement"):
+            if not 0.0 <= getattr(self, name) < 1.0:
+                raise ValueError(f"{name} must be in [0, 1), got {getattr(self, name)}")
+        if self.map not in ("refit", "rebuild"):
+            raise ValueError(f"map must be refit or rebuild, got {self.map!r}")
+
+
+def _pair(value, name: str) -> tuple[float, float]:
+    """Two positive floats (rotation sigma in rad, translation sigma in m)."""
+    pair = tuple(float(v) for v in value)
+    if len(pair) != 2 or not all(v > 0 for v in pair):
+        raise ValueError(f"{name} must be two positive numbers [rad, m], got {list(value)}")
+    return pair
+
+
+@dataclass
 class MappingConfig:
     """Joint optimisation of map and keyframe poses (docs/method.md section 5; Replica values)."""
 
@@ -536,6 +617,8 @@ class MappingConfig:
     noise grows as D^2 (structured light, stereo: Khoshelham and Elberink 2012), in
     weighted means (only the balance between near and far rays changes, not the terms'
     scale); colour stays unweighted. false = every ray alike (the paper; the default)."""
+    loops: LoopClosureConfig = field(default_factory=LoopClosureConfig)
+    """Loop closure: a pose graph over the keyframes and a map that follows it."""
 
     def __post_init__(self) -> None:
         _at_least(self, "every", 1)

@@ -87,6 +87,11 @@ class RunDirectory:
         return self.root / "timings.json"
 
     @property
+    def loops(self) -> Path:
+        """loops.json: every loop candidate and its decision (with loop closure on)."""
+        return self.root / "loops.json"
+
+    @property
     def log(self) -> Path:
         """log.txt: the run's log."""
         return self.root / "log.txt"

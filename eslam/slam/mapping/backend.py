@@ -32,6 +32,8 @@ from eslam.field.scene_field import SceneField
 from eslam.registry import Registry
 from eslam.slam.context import RunContext
 from eslam.slam.cuda_graphs import WindowMapper
+from eslam.slam.loops.closer import LoopCloser, anchors
+from eslam.slam.loops.pose_graph import carry_poses
 from eslam.slam.mapping.bounds_policy import (
     bound_from_frame,
     check_depth_found,
@@ -88,6 +90,9 @@ class KeyframeBackEnd:
             config.data.depth_scale, bound=None, enabled=config.data.depth_check
         )
         self._before: tuple[dict[str, torch.Tensor], torch.Tensor] | None = None
+        self.loops = (
+            LoopCloser(context, self.follow_correction) if config.mapping.loops.enabled else None
+        )
 
     def begin_frame(self) -> None:
         self._before = None
@@ -117,6 +122,13 @@ class KeyframeBackEnd:
         return tracked.tracked and share is not None and share < coverage
 
     def finish(self, state: SLAMState, last: Frame | None) -> None:
+        self._map_last(state, last)
+        passes = self.context.config.mapping.loops.final_passes
+        if self.loops is not None and passes > 0 and not state.component("loops").get("final"):
+            self.passes(state, passes, optimise_poses=True)
+            state.component("loops")["final"] = True
+
+    def _map_last(self, state: SLAMState, last: Frame | None) -> None:
         if state.last_mapped:
             return
         if last is None:
@@ -209,6 +221,60 @@ class KeyframeBackEnd:
             state.trajectory.set_poses([frame_of[window[i]] for i in moved], result.poses[moved])
         window_frames = tuple(frame_of[k] for k in window)
         observers.on_mapping(MappingDone(index, window_frames, schedule.iterations, result.loss))
+        if self.loops is not None:
+            self.loops.after_keyframe(index, current, state)
+
+    def follow_correction(self, state: SLAMState) -> None:
+        """The map follows a loop correction (``mapping.loops.map``): a new field first
+        when ``rebuild``, then ``refit_passes`` over every keyframe, poses held."""
+        loops = self.context.config.mapping.loops
+        if loops.map == "rebuild":
+            field = state.field
+            if field is None:
+                raise RuntimeError("a loop correction before the field exists")
+            state.field = new_field(self.context.config, field.bound, self.context.device)
+            self.passes(state, 1, optimise_poses=False, first=True)
+        self.passes(state, loops.refit_passes, optimise_poses=False)
+
+    def passes(
+        self, state: SLAMState, passes: int, optimise_poses: bool, first: bool = False
+    ) -> None:
+        """``passes`` over every keyframe: mapping calls of ``mapping.iterations`` steps
+        on windows of ``mapping.window`` keyframes holding each keyframe once per pass,
+        in an order drawn from the run's generator; keyframe 0's pose held, the others'
+        refined with ``optimise_poses``. ``first``: one call with the first frame's
+        schedule (the map is new) on the first window instead."""
+        field, store = state.field, state.keyframes
+        if field is None:
+            raise RuntimeError("mapping passes before the field exists")
+        config = self.context.config.mapping
+        frame_of = store.frame_indices
+        generator = state.generator
+        count = state.next_frame
+        before = state.trajectory.poses[:count].detach().cpu().double().numpy()
+        keyframes_before = before[list(frame_of)]
+        for _ in range(passes):
+            order = torch.randperm(len(store), generator=generator, device=generator.device)
+            windows = torch.split(order.cpu(), config.window)
+            for window in windows[:1] if first else windows:
+                keyframes = sorted(window.tolist())
+                optimise = [optimise_poses and k != 0 for k in keyframes]
+                result = self.mapper.map(
+                    field,
+                    self._views(state).views(keyframes),
+                    store.poses[keyframes].to(self.context.device),
+                    optimise,
+                    mapping_schedule(config, first=first),
+                    generator=state.generator,
+                )
+                moved = [i for i, flag in enumerate(optimise) if flag]
+                if moved:
+                    frames = [frame_of[keyframes[i]] for i in moved]
+                    state.trajectory.set_poses(frames, result.poses[moved])
+        if optimise_poses:  # every frame moves with the latest keyframe at or before it
+            after = state.trajectory.poses[list(frame_of)].detach().cpu().double().numpy()
+            moved = carry_poses(before, anchors(frame_of, count), keyframes_before, after)
+            state.trajectory.set_poses(list(range(count)), torch.from_numpy(moved))
 
 
 BACK_ENDS: Registry[BackEnd] = Registry("mapping back end", "mapping.back_end")

@@ -33,6 +33,8 @@ from eslam.errors import OutputError, RunStopped
 from eslam.evaluate.trajectory import absolute_trajectory_error, relative_pose_error
 from eslam.io.run_dir import RunDirectory, write_json
 from eslam.io.trajectory import write_tum_trajectory
+from eslam.slam.loops.closer import COMPONENT as LOOPS
+from eslam.slam.loops.closer import loop_metrics
 from eslam.slam.run.observers import FrameDone, RunEnd, RunObserverBase, RunStart
 from eslam.slam.run.progress import finite_ate_pairs
 from eslam.slam.run.resources import PeakMemory
@@ -137,6 +139,7 @@ def run_metrics(state: SLAMState, device: str, peak_memory_mb: float) -> dict:
         metrics["tracking_ended_tracked"] = not bool(failed[judged][-1])
         metrics["tracking_iterations_mean"] = float(quality["tracking_iterations"][judged].mean())
         metrics.update(recovery_metrics(state.tracking_quality))
+    metrics.update(loop_metrics(state))
     if np.isfinite(quality["tracking_degenerate_directions"]).any():  # the test ran
         metrics["tracking_degenerate_frames"] = sum(map(degenerate_row, state.tracking_quality))
     gt = state.trajectory.gt_poses()
@@ -304,3 +307,5 @@ class RunWriter(RunObserverBase):
         if self.stream is not None:  # no resume: the run's frames are this process's
             timings["source_index"] = self.stream.source_indices[: state.next_frame]
         write_json(self.run.timings, timings)
+        if LOOPS in state.components:  # loop closure is on
+            write_json(self.run.loops, state.components[LOOPS]["entries"])

@@ -1,0 +1,274 @@
+"""Loop closure after a keyframe's mapping call: find, verify, solve, and let the map follow.
+
+:class:`LoopCloser` (``mapping.loops``, docs/loops.md) runs inside the mapping back end,
+after each keyframe is mapped:
+
+1. **Candidates**: earlier keyframes far enough back that may see the same place, by
+   pose and by appearance (:mod:`eslam.slam.loops.candidates`).
+2. **Verification**: the new keyframe's depth registered to each candidate's by
+   projective point-to-plane ICP (:mod:`eslam.slam.loops.icp`) from the candidate's
+   guess; accepted only with ``min_inlier_fraction`` of its points on the candidate's
+   surface, an RMS residual of at most ``max_residual`` and every direction constrained.
+   Every candidate and its decision is recorded (``loops.json``).
+3. **Pose graph**: when the best accepted loop disagrees with the estimate by more than
+   ``min_correction`` / ``min_correction_deg``, the keyframes' poses are solved with
+   odometry edges (each consecutive pair's relative pose as estimated now) and every
+   loop edge so far (robust), keyframe 0 held (:mod:`eslam.slam.loops.pose_graph`);
+   every frame moves with the latest keyframe at or before it.
+4. **The map follows**: the back end fits the field again at the corrected poses
+   (``mapping.loops.map``).
+
+State lives in the run's ``components["loops"]`` (loop edges by frame index, the record
+of every candidate, counts), so it is checkpointed, rolled back with a failed frame and
+resumed: a resumed run ends as an uninterrupted one. The places (descriptors, features)
+are described again from the keyframe store after a resume. Its random draws use a
+generator of its own, seeded by the frame: the run's random stream is the same with
+loop closure on as off until a loop is closed.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+
+import numpy as np
+import torch
+
+from eslam.slam.context import RunContext
+from eslam.slam.loops.candidates import Candidate, by_appearance, by_pose, far_enough
+from eslam.slam.loops.icp import IcpResult, IcpSettings, register
+from eslam.slam.loops.pose_graph import Edge, carry_poses, import_gtsam, solve_pose_graph
+from eslam.slam.mapping.keyframes import KeyframeStore
+from eslam.slam.places.index import PlaceIndex
+from eslam.slam.state import SLAMState
+
+COMPONENT = "loops"
+"""The key of the loop closer's state in ``SLAMState.components``."""
+
+
+def pose_difference(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
+    """(metres, degrees) between two poses: |t| and the angle of a^-1 b."""
+    delta = np.linalg.solve(a, b)
+    cosine = np.clip((np.trace(delta[:3, :3]) - 1.0) / 2.0, -1.0, 1.0)
+    return float(np.linalg.norm(delta[:3, 3])), math.degrees(math.acos(cosine))
+
+
+class LoopCloser:
+    """Loop closure for one run (module doc).
+
+    Args:
+        context: the run's settings and log.
+        refit: fits the map again at the corrected poses (the back end's).
+    """
+
+    def __init__(self, context: RunContext, refit: Callable[[SLAMState], None]) -> None:
+        import_gtsam()  # a missing extra is named before the first frame
+        self.context = context
+        self.config = context.config.mapping.loops
+        self.refit = refit
+        self.icp = IcpSettings()
+        self.places: PlaceIndex | None = None
+
+    def own(self, state: SLAMState) -> dict:
+        """The loop closer's state in ``state`` (module doc), created on first use."""
+        own = state.component(COMPONENT)
+        own.setdefault("edges", [])
+        own.setdefault("entries", [])
+        own.setdefault("corrections", 0)
+        return own
+
+    def after_keyframe(self, index: int, current: int, state: SLAMState) -> None:
+        """Keyframe ``current`` (frame ``index``) was just mapped: look for a loop."""
+        own = self.own(state)
+        store = state.keyframes
+        started = time.perf_counter()
+        positions = store.poses[:, :3, 3].detach().cpu().double().numpy()
+        eligible = far_enough(positions, current, self.config)
+        if not eligible:
+            return
+        if self.places is None or self.places.store is not store:
+            self.places = PlaceIndex(store)
+        generator = torch.Generator().manual_seed(index)
+        candidates = by_pose(store, current, eligible, self.config, generator)
+        unseen = [k for k in eligible if k not in {c.keyframe for c in candidates}]
+        alike, unmatched = by_appearance(self.places, current, unseen, self.config, index)
+        candidates += alike
+        for k, similarity in unmatched:
+            own["entries"].append(self._entry(index, store, k, "appearance", None, similarity))
+        accepted = []
+        for candidate in candidates:
+            result = self._verify(store, current, candidate)
+            entry = self._entry(
+                index, store, candidate.keyframe, candidate.found_by, result, candidate.score
+            )
+            own["entries"].append(entry)
+            if entry["accepted"]:
+                accepted.append((result.inlier_fraction, candidate, result, entry))
+        if accepted:
+            self._close(index, current, state, max(accepted, key=lambda a: a[0]))
+        self.context.logger.debug(
+            "loop search at frame %d: %d candidates in %.2f s",
+            index,
+            len(candidates),
+            time.perf_counter() - started,
+        )
+
+    def _verify(self, store: KeyframeStore, current: int, candidate: Candidate) -> IcpResult:
+        """ICP of keyframe ``current``'s depth onto the candidate's, from its guess."""
+        target = store.poses[candidate.keyframe].detach().cpu().double().numpy()
+        initial = np.linalg.solve(target, candidate.guess)
+        greys = tuple(
+            store.rgb(k, "cpu").mean(dim=-1).double().numpy() for k in (current, candidate.keyframe)
+        )
+        return register(
+            store.depth(current, "cpu").numpy(),
+            store.depth(candidate.keyframe, "cpu").numpy(),
+            store.intrinsics,
+            initial,
+            self.icp,
+            greys,
+        )
+
+    def _entry(
+        self,
+        index: int,
+        store: KeyframeStore,
+        k: int,
+        found_by: str,
+        result: IcpResult | None,
+        score: float,
+    ) -> dict:
+        """One record of loops.json: the pair, how it was found, the registration and
+        the decision (why not, when refused)."""
+        entry = {
+            "frame": index,
+            "candidate_frame": store.frame_indices[k],
+            "found_by": found_by,
+            "score": round(score, 4),
+            "relative_pose": None,
+            "inlier_fraction": None,
+            "residual_m": None,
+            "colour_agreement": None,
+            "accepted": False,
+            "why_not": None,
+        }
+        if result is None:
+            entry["why_not"] = "too few feature matches for a first relative pose"
+            return entry
+        entry["relative_pose"] = np.round(result.pose, 6).tolist()
+        entry["inlier_fraction"] = round(result.inlier_fraction, 4)
+        entry["residual_m"] = round(result.residual, 6) if math.isfinite(result.residual) else None
+        entry["colour_agreement"] = round(result.colour_agreement, 4)
+        config = self.config
+        if result.inlier_fraction < config.min_inlier_fraction:
+            entry["why_not"] = (
+                f"{result.inlier_fraction:.0%} of the points on the candidate's surface "
+                f"(needs {config.min_inlier_fraction:.0%})"
+            )
+        elif result.residual > config.max_residual:
+            entry["why_not"] = (
+                f"residual {result.residual * 1000:.1f} mm (at most "
+                f"{config.max_residual * 1000:.1f} mm)"
+            )
+        elif result.min_eigenvalue < config.min_eigenvalue:
+            entry["why_not"] = (
+                f"a direction is not constrained (eigenvalue {result.min_eigenvalue:.2g} < "
+                f"{config.min_eigenvalue:.2g}: a plane or a corridor)"
+            )
+        elif not result.colour_agreement >= config.min_colour_agreement:
+            entry["why_not"] = (
+                f"the surfaces fit but {result.colour_agreement:.0%} of their colours agree "
+                f"(needs {config.min_colour_agreement:.0%}): another place of the same shape"
+            )
+        else:
+            entry["accepted"] = True
+        return entry
+
+    def _close(self, index: int, current: int, state: SLAMState, best) -> None:
+        """Add the best accepted loop's edge; solve and refit when it corrects enough."""
+        _, candidate, result, entry = best
+        own = self.own(state)
+        store = state.keyframes
+        frames = store.frame_indices
+        own["edges"].append([frames[candidate.keyframe], index, *np.ravel(result.pose).tolist()])
+        poses = store.poses.detach().cpu().double().numpy()
+        estimated = np.linalg.solve(poses[candidate.keyframe], poses[current])
+        metres, degrees = pose_difference(estimated, result.pose)
+        entry["correction_cm"] = round(100 * metres, 3)
+        entry["correction_deg"] = round(degrees, 4)
+        if metres < self.config.min_correction and degrees < self.config.min_correction_deg:
+            entry["closed"] = False
+            return
+        started = time.perf_counter()
+        solution = solve_pose_graph(poses, self._edges(poses, frames, own["edges"]))
+        trajectory = state.trajectory
+        count = state.next_frame
+        before = trajectory.poses[:count].detach().cpu().double().numpy()
+        moved = carry_poses(before, anchors(frames, count), poses, solution.poses)
+        trajectory.set_poses(list(range(count)), torch.from_numpy(moved))
+        shift, turn = pose_difference(poses[current], solution.poses[current])
+        self.refit(state)
+        own["corrections"] += 1
+        entry["closed"] = True
+        self.context.logger.info(
+            "loop closed: frame %d with frame %d (%.0f %% inliers, %.1f mm residual): the "
+            "estimate was %.1f cm / %.2f deg off; frame %d moved %.1f cm / %.2f deg; pose "
+            "graph and map refit %.1f s",
+            index,
+            frames[candidate.keyframe],
+            100 * result.inlier_fraction,
+            1000 * result.residual,
+            100 * metres,
+            degrees,
+            index,
+            100 * shift,
+            turn,
+            time.perf_counter() - started,
+        )
+
+    def _edges(self, poses: np.ndarray, frames: tuple[int, ...], loops: list) -> list[Edge]:
+        """Odometry edges between consecutive keyframes (as estimated now) and the loop
+        edges whose keyframes are in the store."""
+        rotation, translation = self.context.config.mapping.loops.odometry_sigma
+        edges = [
+            Edge(k, k + 1, np.linalg.solve(poses[k], poses[k + 1]), rotation, translation)
+            for k in range(len(poses) - 1)
+        ]
+        rotation, translation = self.config.loop_sigma
+        node = {frame: k for k, frame in enumerate(frames)}
+        for a, b, *relative in loops:
+            if a in node and b in node:
+                edges.append(
+                    Edge(
+                        node[a],
+                        node[b],
+                        np.reshape(relative, (4, 4)),
+                        rotation,
+                        translation,
+                        robust=True,
+                        robust_k=self.config.robust_k,
+                    )
+                )
+        return edges
+
+
+def anchors(keyframe_frames: tuple[int, ...], count: int) -> np.ndarray:
+    """(count,) for each frame 0..count-1 the latest keyframe at or before it (frames
+    before the first keyframe: keyframe 0), the node it moves with."""
+    latest = np.searchsorted(np.asarray(keyframe_frames), np.arange(count), side="right") - 1
+    return np.maximum(latest, 0)
+
+
+def loop_metrics(state: SLAMState) -> dict:
+    """metrics.json's loop figures: candidates accepted and refused, loops closed."""
+    own = state.components.get(COMPONENT)
+    if own is None:
+        return {}
+    entries = own.get("entries", [])
+    accepted = sum(1 for e in entries if e["accepted"])
+    return {
+        "loops_accepted": accepted,
+        "loops_rejected": len(entries) - accepted,
+        "loops_closed": int(own.get("corrections", 0)),
+    }
