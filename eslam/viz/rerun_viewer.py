@@ -53,6 +53,8 @@ FLUSH_TIMEOUT_S = 60.0
 """Longest wait for the stream to drain when the run ends, seconds."""
 ESTIMATE_COLOUR = (230, 60, 60)
 GROUND_TRUTH_COLOUR = (40, 40, 40)
+LOOP_COLOUR = (40, 160, 240)
+"""Loop edges: the two camera centres each accepted loop joins."""
 
 
 def import_rerun():
@@ -151,6 +153,11 @@ class RerunSink:
                 "world/trajectory/ground_truth",
                 rr.LineStrips3D([ground_truth], colors=[GROUND_TRUTH_COLOUR]),
             )
+
+    def show_loops(self, index: int, segments: np.ndarray) -> None:
+        rr = self.rr
+        self._at(index)
+        self.recording.log("world/loops", rr.LineStrips3D(list(segments), colors=[LOOP_COLOUR]))
 
     def show_rendered(
         self, index: int, intrinsics: Intrinsics, depth: np.ndarray, rgb: np.ndarray

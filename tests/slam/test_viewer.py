@@ -31,6 +31,9 @@ class RecordingSink:
     def show_trajectory(self, index, estimated, ground_truth) -> None:
         self.calls.append(("trajectory", index, estimated.copy(), ground_truth.copy()))
 
+    def show_loops(self, index, segments) -> None:
+        self.calls.append(("loops", index, segments.copy()))
+
     def show_rendered(self, index, intrinsics, depth, rgb) -> None:
         self.calls.append(("rendered", index, intrinsics.size, depth.copy(), rgb.shape))
 
@@ -164,3 +167,24 @@ def test_dropped_frames_are_the_stream_position_ahead_of_the_run_position(tiny_s
     assert "stream/dropped_frames" not in frame_scalars(
         FrameDone(1, pose, True, None, False, 0.0, 0.0)
     )
+
+
+def test_the_viewer_shows_loop_edges_when_they_change(tiny_run) -> None:
+    """With loop closure on, each loop edge joins the two frames' camera centres; they
+    are sent again only when an edge was added."""
+    run_dir = tiny_run.run_dir
+    config = load_config(run_dir / "config.yaml", ["viewer.render_every=0", "viewer.mesh_every=0"])
+    state = load_state(run_dir / "map.pt", config, torch.device("cpu"))
+    last = len(state.trajectory.poses) - 1
+    state.components["loops"] = {"edges": [[0, last, *np.eye(4).ravel().tolist()]]}
+    sink = RecordingSink()
+    observer = ViewerObserver(sink, config.viewer)
+    observer.on_start(
+        RunStart(config, run_dir, state, torch.device("cpu"), "tiny", last + 1, False)
+    )
+    pose = state.trajectory.poses[last]
+    for _ in range(2):
+        observer.on_frame(FrameDone(last, pose, True, None, False, 0.25, 0.0))
+    (call,) = sink.of("loops")
+    centres = state.trajectory.poses[[0, last], :3, 3].double().numpy()
+    np.testing.assert_allclose(call[2], centres[None], atol=1e-12)

@@ -51,6 +51,11 @@ class ViewerSink(Protocol):
         """Camera centres so far: (N, 3) estimated, (M, 3) ground truth or None."""
         ...
 
+    def show_loops(self, index: int, segments: np.ndarray) -> None:
+        """The pose graph's loop edges as of frame ``index``: (L, 2, 3) pairs of camera
+        centres (estimated) joined by a loop (replaces those shown before)."""
+        ...
+
     def show_rendered(
         self, index: int, intrinsics: Intrinsics, depth: np.ndarray, rgb: np.ndarray
     ) -> None:
@@ -73,6 +78,16 @@ class ViewerSink(Protocol):
     def discard(self) -> None:
         """The run never started (bad input before its first frame): keep nothing."""
         ...
+
+
+def loop_segments(edges: list, estimated: np.ndarray) -> np.ndarray:
+    """(L, 2, 3) the camera centres ``estimated`` (N, 3) of each loop edge's two frames
+    (loops.json's edges: [frame a, frame b, relative pose...]); edges of frames past the
+    trajectory are left out."""
+    pairs = [(int(e[0]), int(e[1])) for e in edges if max(e[0], e[1]) < len(estimated)]
+    if not pairs:
+        return np.zeros((0, 2, 3))
+    return np.stack([estimated[[a, b]] for a, b in pairs])
 
 
 def frame_scalars(done: FrameDone) -> dict[str, float]:
@@ -124,6 +139,7 @@ class ViewerObserver(RunObserverBase):
         self.start: RunStart | None = None
         self.keyframes = 0
         self.last_index = -1
+        self.loops_shown = 0
         self.closed = False
 
     def on_start(self, start: RunStart) -> None:
@@ -190,10 +206,17 @@ class ViewerObserver(RunObserverBase):
             self.sink.close(complete)
 
     def _show_trajectory(self, index: int) -> None:
-        trajectory = self.start.state.trajectory
-        estimated = trajectory.poses.detach().to("cpu", torch.float64).numpy()
+        """The trajectory (corrected by loop closure, refined by mapping: all of it is
+        sent each time) and, with loop closure on, its loop edges when they changed."""
+        state = self.start.state
+        trajectory = state.trajectory
+        estimated = centres(trajectory.poses.detach().to("cpu", torch.float64).numpy())
         gt = trajectory.gt_poses()
-        self.sink.show_trajectory(index, centres(estimated), None if gt is None else centres(gt))
+        self.sink.show_trajectory(index, estimated, None if gt is None else centres(gt))
+        edges = state.components.get("loops", {}).get("edges", [])
+        if len(edges) != self.loops_shown:
+            self.loops_shown = len(edges)
+            self.sink.show_loops(index, loop_segments(edges, estimated))
 
     def _render(self, index: int, pose: torch.Tensor) -> None:
         start = self.start

@@ -1,0 +1,123 @@
+"""Loop closure on the synthetic loop: ATE, loops and mesh with it off and on (docs/loops.md).
+
+The room's loop trajectory (``eslam synth --trajectory loop``: laps around the room
+looking outwards, about 250 frames a lap at 1 cm a frame) is rendered with exact ground
+truth, ``--frames`` frames at ``--size``, with ``--focal-error`` (the frames report a
+focal length that much off: odometry drifts) and the sensor flaws ``--depth-noise`` and
+``--missing-depth``. Each ``--settings`` entry (``off`` = the config as it is, ``on`` =
+``mapping.loops.enabled=true``, or any ``key=value,key=value``) is one run and one
+markdown row: ATE, the position error where the camera is back at its start (no
+alignment: frame 0 starts at its ground truth) and the largest, loops accepted /
+refused / closed, wall time, and with ``--mesh`` the mesh's accuracy and completion
+against the scene's mesh (``eslam eval``'s, the ``eval`` extra).
+
+    python benchmarks/loop_closure.py --out /tmp/loops --focal-error 0.02
+
+Prints the table only (docs/results.md takes its rows by hand).
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from eslam.cli.args import image_size
+from eslam.config import load_config
+from eslam.slam.session import run_slam
+from eslam.synthetic import SynthConfig, read_synthetic_bound, write_synthetic_sequence
+from eslam.synthetic.scenes import build_scene
+from eslam.synthetic.trajectory import loop_lap_frames
+from eslam.workflows.demo import DEMO_CONFIG
+
+PRESETS = {"off": (), "on": ("mapping.loops.enabled=true",)}
+
+
+def mesh_cells(run_dir: Path, data: Path) -> str:
+    """Accuracy and completion (cm) of the run's mesh against the scene's."""
+    from eslam.workflows.evaluate_run import EvaluationOptions, evaluate_run
+
+    options = EvaluationOptions(gt_mesh=data / "mesh.ply", depth_l1_views=0)
+    metrics = evaluate_run(run_dir, options)
+    return f" | {metrics['accuracy_cm']:.2f} | {metrics['completion_cm']:.2f}"
+
+
+def row(name: str, run_dir: Path, lap: int, metrics: dict, wall: float) -> str:
+    """One markdown row for the run in ``run_dir`` (module doc), without the mesh."""
+    estimate = np.loadtxt(run_dir / "trajectory.txt")
+    truth = np.loadtxt(run_dir / "trajectory_gt.txt")
+    errors = 100.0 * np.linalg.norm(estimate[:, 1:4] - truth[:, 1:4], axis=1)
+    back = f"{errors[lap]:.2f}" if lap < len(errors) else "-"
+    loops = "-"
+    if "loops_accepted" in metrics:
+        loops = (
+            f"{metrics['loops_accepted']} / {metrics['loops_rejected']} / {metrics['loops_closed']}"
+        )
+    return (
+        f"| {name} | {metrics['ate_rmse_cm']:.2f} | {back} | {errors.max():.2f} | {loops} "
+        f"| {wall / 60:.1f}"
+    )
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n", 1)[0])
+    parser.add_argument("--out", type=Path, required=True, help="folder for data and runs")
+    parser.add_argument("--config", type=Path, default=DEMO_CONFIG, help="(configs/demo.yaml)")
+    parser.add_argument("--size", type=image_size, default=(160, 120), help="WxH (160x120)")
+    parser.add_argument("--frames", type=int, default=300, help="frames (300: a lap and more)")
+    parser.add_argument("--focal-error", type=float, default=0.0)
+    parser.add_argument("--depth-noise", action="store_true")
+    parser.add_argument("--missing-depth", action="store_true")
+    parser.add_argument("--settings", nargs="+", default=["off", "on"])
+    parser.add_argument("--mesh", action="store_true", help="score the meshes (eval extra)")
+    parser.add_argument("--threads", type=int, default=1)
+    args = parser.parse_args(argv)
+    torch.set_num_threads(args.threads)
+    loop = SynthConfig(
+        frames=args.frames,
+        width=args.size[0],
+        height=args.size[1],
+        trajectory="loop",
+        focal_error=args.focal_error,
+        depth_noise=args.depth_noise,
+        missing_depth=args.missing_depth,
+    )
+    lap = loop_lap_frames(build_scene(loop.scene, loop.seed), replace(loop, frames=1))
+    data = args.out / "data"
+    if not (data / "synth.json").is_file():
+        write_synthetic_sequence(data, loop, overwrite=True)
+    head = "| loop closure | ATE RMSE (cm) | error back at the start (cm) | largest error (cm) "
+    head += "| loops accepted / refused / closed | wall (min)"
+    rule = "|---|---:|---:|---:|---:|---:"
+    if args.mesh:
+        head, rule = head + " | mesh accuracy (cm) | completion (cm)", rule + "|---:|---:"
+    lines = [head + " |", rule + "|"]
+    for index, name in enumerate(args.settings):
+        settings = PRESETS.get(name, tuple(name.split(",")))
+        config = load_config(
+            args.config,
+            [
+                f"data.path={data}",
+                f"scene.bound={read_synthetic_bound(data)}",
+                f"output.mesh={str(args.mesh).lower()}",
+                "output.progress=false",
+                *settings,
+            ],
+        )
+        run_dir = args.out / f"run-{index}"
+        start = time.perf_counter()
+        metrics = run_slam(config, run_dir, overwrite=True).metrics
+        line = row(name, run_dir, lap, metrics, time.perf_counter() - start)
+        if args.mesh:
+            line += mesh_cells(run_dir, data)
+        lines.append(line + " |")
+        print(lines[-1], flush=True)
+    print("\n".join(lines))
+
+
+if __name__ == "__main__":
+    main()
