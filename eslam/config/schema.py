@@ -494,9 +494,9 @@ class LoopClosureConfig:
     candidates: int = 2
     """Candidates tried per keyframe by pose, and as many again by appearance (global
     image descriptor, then ORB matches for a first relative pose)."""
-    min_inlier_fraction: float = 0.5
-    """Accept a registration only when this share of the new keyframe's points (with
-    depth) lands on the candidate's surface (within 2 cm, normals agreeing) ..."""
+    min_inlier_fraction: float = 0.6
+    """Accept a registration only when this share of the new keyframe's points that
+    fall in the candidate's view lands on its surface (within 2 cm, normals agreeing) ..."""
     max_residual: float = 0.01
     """... with an RMS point-to-plane residual of at most this, metres ..."""
     min_eigenvalue: float = 0.001

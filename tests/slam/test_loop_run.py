@@ -21,8 +21,8 @@ from tests.conftest import demo_config, static_ate_cm
 
 pytest.importorskip("gtsam", reason="the loops extra (GTSAM) is not installed")
 
-ROOM = SynthConfig(frames=14, width=120, height=90, seed=0)
-ORDER = (*range(14), *range(12, 2, -2))  # out to frame 13, back to frame 4 two at a time
+ROOM = SynthConfig(frames=10, width=120, height=90, seed=0)
+ORDER = (*range(10), *range(8, 0, -2))  # out to frame 9, back to frame 2 two at a time
 LOOPS = (
     "mapping.loops.enabled=true",
     "mapping.loops.min_keyframes_back=3",

@@ -36,6 +36,9 @@ class IcpSettings:
 
     Attributes:
         stride: take every stride-th source pixel in each direction.
+        normal_step: normals from differences this many pixels either side; None =
+            one per 128 pixels of image width (a sensor's noise is per pixel, so a
+            larger image needs a longer baseline: 5 at 640x480, 1 at 160x120).
         gates: distance gate of each step, coarse to fine (its length is the steps).
         inlier_distance: a pair closer than this (and normals agreeing) is an inlier.
         min_normal_cosine: normals of a pair must agree at least this well.
@@ -46,6 +49,7 @@ class IcpSettings:
     """
 
     stride: int = 4
+    normal_step: int | None = None
     gates: tuple[float, ...] = (0.2, 0.2, 0.1, 0.1, 0.05, 0.05, 0.03, 0.03, 0.02, 0.02)
     inlier_distance: float = 0.02
     min_normal_cosine: float = 0.8
@@ -59,7 +63,8 @@ class IcpResult:
 
     Attributes:
         pose: (4, 4) source camera to target camera (p_target = pose @ p_source).
-        inlier_fraction: inliers over the source points with depth.
+        inlier_fraction: inliers over the source points that project into the target's
+            view onto a pixel with depth (the overlap's points).
         overlap: source points that project inside the target image with depth there,
             over the source points with depth.
         residual: RMS point-to-plane residual of the inliers, metres.
@@ -89,17 +94,23 @@ def vertex_map(depth: np.ndarray, intrinsics: Intrinsics) -> np.ndarray:
     return np.stack([x, y, z], axis=-1)
 
 
-def normal_map(vertices: np.ndarray) -> np.ndarray:
-    """(H, W, 3) unit normals from central differences of ``vertices``, facing the
-    camera; zero where a neighbour has no depth or the cross product vanishes."""
+def normal_map(vertices: np.ndarray, step: int = 1) -> np.ndarray:
+    """(H, W, 3) unit normals from central differences of ``vertices`` ``step`` pixels
+    either side (a longer baseline averages a noisy sensor's depth), facing the camera;
+    zero where a neighbour has no depth or the cross product vanishes."""
+    s = step
     dx = np.zeros_like(vertices)
     dy = np.zeros_like(vertices)
-    dx[:, 1:-1] = vertices[:, 2:] - vertices[:, :-2]
-    dy[1:-1] = vertices[2:] - vertices[:-2]
+    dx[:, s:-s] = vertices[:, 2 * s :] - vertices[:, : -2 * s]
+    dy[s:-s] = vertices[2 * s :] - vertices[: -2 * s]
     valid = vertices[..., 2] > 0
     neighbours = np.zeros_like(valid)
-    neighbours[1:-1, 1:-1] = (
-        valid[1:-1, 2:] & valid[1:-1, :-2] & valid[2:, 1:-1] & valid[:-2, 1:-1] & valid[1:-1, 1:-1]
+    neighbours[s:-s, s:-s] = (
+        valid[s:-s, 2 * s :]
+        & valid[s:-s, : -2 * s]
+        & valid[2 * s :, s:-s]
+        & valid[: -2 * s, s:-s]
+        & valid[s:-s, s:-s]
     )
     normals = np.cross(dx, dy)
     length = np.linalg.norm(normals, axis=-1, keepdims=True)
@@ -141,15 +152,17 @@ class _Pairs:
 class _Images:
     """The source points and the target's vertex and normal maps, built once."""
 
-    def __init__(self, source_depth, target_depth, intrinsics: Intrinsics, stride: int):
+    def __init__(
+        self, source_depth, target_depth, intrinsics: Intrinsics, stride: int, normal_step: int
+    ):
         source = vertex_map(source_depth, intrinsics)
-        normals = normal_map(source)[::stride, ::stride].reshape(-1, 3)
+        normals = normal_map(source, normal_step)[::stride, ::stride].reshape(-1, 3)
         points = source[::stride, ::stride].reshape(-1, 3)
         keep = (points[:, 2] > 0) & (np.abs(normals).sum(axis=1) > 0)
         self.points, self.normals = points[keep], normals[keep]
         self.stride, self.kept = stride, keep
         self.target = vertex_map(target_depth, intrinsics)
-        self.target_normals = normal_map(self.target)
+        self.target_normals = normal_map(self.target, normal_step)
         self.intrinsics = intrinsics
 
     def pair(self, pose: np.ndarray, gate: float, min_cosine: float) -> _Pairs:
@@ -194,7 +207,8 @@ def register(
     """Register ``source_depth`` to ``target_depth`` (same camera) from ``initial``
     (source camera to target camera); module doc. ``greys``: the (H, W) grey images in
     [0, 1] of source and target, for the colour agreement of the result."""
-    images = _Images(source_depth, target_depth, intrinsics, settings.stride)
+    step = settings.normal_step or max(1, round(intrinsics.width / 128))
+    images = _Images(source_depth, target_depth, intrinsics, settings.stride, step)
     pose = np.asarray(initial, dtype=np.float64).copy()
     information = np.zeros((6, 6))
     for gate in settings.gates:
@@ -215,7 +229,7 @@ def register(
     count = int(final.pairs.sum())
     residual = float(np.sqrt(np.mean(final.residuals[final.pairs] ** 2))) if count else math.inf
     eigen = float(np.linalg.eigvalsh(information)[0]) / count if count else 0.0
-    total = max(len(images.points), 1)
+    total = max(round(final.overlap * len(images.points)), 1)
     colour = math.nan
     if greys is not None:
         colour = images.colour_agreement(final, *greys, settings.colour_tolerance)
