@@ -506,11 +506,16 @@ class LoopClosureConfig:
     """... and this share of those points showing the candidate's colour there (grey
     within 0.1 after removing the median difference: exposure): a box-shaped room fits
     itself turned round, its texture does not."""
-    min_correction: float = 0.01
+    min_correction: float = 0.02
     """A loop whose relative pose differs from the estimate's by less than this (metres)
-    and ``min_correction_deg`` is kept in the graph but closes nothing (no solve, no refit)."""
-    min_correction_deg: float = 0.5
+    and ``min_correction_deg`` is kept in the graph but closes nothing (no solve, no
+    refit): registration has errors of its own (on TUM fr1/xyz depth-only ICP differs
+    from motion capture by about 1 degree), a correction below them is noise."""
+    min_correction_deg: float = 1.0
     """See ``min_correction``, degrees."""
+    min_keyframes_between: int = 10
+    """Solve and refit at most once per this many keyframes; loops accepted in between
+    add their edges for the next solve."""
     odometry_sigma: tuple[float, float] = (0.002, 0.005)
     """Pose-graph noise of the edge between consecutive keyframes: rotation (rad) and
     translation (m) per component."""
@@ -524,9 +529,9 @@ class LoopClosureConfig:
     at its corrected pose from the current field; rebuild = a new field, fitted with the
     first frame's schedule on the first window, then the refit passes."""
     refit_passes: int = 1
-    """Passes over every keyframe after a correction, poses held: mapping calls of
-    ``mapping.iterations`` steps on windows of ``mapping.window`` keyframes that together
-    hold each keyframe once per pass (in a shuffled order)."""
+    """Passes after a correction over the keyframes it moved (at least 5 mm or 0.25
+    degrees), poses held: mapping calls of ``mapping.iterations`` steps on windows of
+    ``mapping.window`` keyframes that together hold each once per pass (shuffled)."""
     final_passes: int = 0
     """At the end of the run, passes as ``refit_passes`` with every keyframe's pose
     optimised too but the first's (a global refinement); 0 = off."""
@@ -535,6 +540,7 @@ class LoopClosureConfig:
         self.odometry_sigma = _pair(self.odometry_sigma, "odometry_sigma")
         self.loop_sigma = _pair(self.loop_sigma, "loop_sigma")
         _at_least(self, "min_keyframes_back", 1)
+        _at_least(self, "min_keyframes_between", 1)
         _at_least(self, "candidates", 0)
         _at_least(self, "refit_passes", 0)
         _at_least(self, "final_passes", 0)

@@ -63,7 +63,7 @@ def _closer_and_state(estimates: list[np.ndarray], keyframes: dict[int, Frame], 
     for index, frame in sorted(keyframes.items()):
         state.keyframes.add(frame, index)
     refits: list[int] = []
-    closer = LoopCloser(context, lambda s: refits.append(s.next_frame))
+    closer = LoopCloser(context, lambda s, moved: refits.append((s.next_frame, len(moved))))
     return closer, state, refits
 
 
@@ -91,7 +91,8 @@ def test_a_drifted_return_is_closed_and_the_error_shrinks() -> None:
     closed = [e for e in entries if e.get("closed")]
     assert len(closed) == 1 and closed[0]["candidate_frame"] <= 12 * EVERY
     assert closed[0]["correction_deg"] > 5.0
-    assert refits == [count]
+    ((frames, moved),) = refits  # one refit, of the keyframes the correction moved
+    assert frames == count and 0 < moved <= len(state.keyframes)
     assert before[-1] > 0.04 and after[-1] < 0.005
     assert np.sqrt(np.mean(after**2)) < 0.5 * np.sqrt(np.mean(before**2))
     metrics = loop_metrics(state)

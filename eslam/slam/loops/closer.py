@@ -43,6 +43,10 @@ from eslam.slam.mapping.keyframes import KeyframeStore
 from eslam.slam.places.index import PlaceIndex
 from eslam.slam.state import SLAMState
 
+REFIT_SHIFT = (0.005, 0.25)
+"""A correction that moves a keyframe at least this far (metres) or turns it this much
+(degrees) refits the map at it; keyframes that moved less keep what they mapped."""
+
 COMPONENT = "loops"
 """The key of the loop closer's state in ``SLAMState.components``."""
 
@@ -59,10 +63,11 @@ class LoopCloser:
 
     Args:
         context: the run's settings and log.
-        refit: fits the map again at the corrected poses (the back end's).
+        refit: fits the map again at the corrected poses of the keyframes (ids) given
+            (the back end's).
     """
 
-    def __init__(self, context: RunContext, refit: Callable[[SLAMState], None]) -> None:
+    def __init__(self, context: RunContext, refit: Callable[[SLAMState, list[int]], None]) -> None:
         import_gtsam()  # a missing extra is named before the first frame
         self.context = context
         self.config = context.config.mapping.loops
@@ -196,6 +201,12 @@ class LoopCloser:
         if metres < self.config.min_correction and degrees < self.config.min_correction_deg:
             entry["closed"] = False
             return
+        last = own.get("last_closed")
+        if last is not None and current - last < self.config.min_keyframes_between:
+            entry["closed"] = False
+            entry["why_not_closed"] = f"closed {current - last} keyframes ago"
+            return
+        own["last_closed"] = current
         started = time.perf_counter()
         solution = solve_pose_graph(poses, self._edges(poses, frames, own["edges"]))
         trajectory = state.trajectory
@@ -204,7 +215,13 @@ class LoopCloser:
         moved = carry_poses(before, anchors(frames, count), poses, solution.poses)
         trajectory.set_poses(list(range(count)), torch.from_numpy(moved))
         shift, turn = pose_difference(poses[current], solution.poses[current])
-        self.refit(state)
+        moved = [
+            k
+            for k in range(len(poses))
+            if max(*np.divide(pose_difference(poses[k], solution.poses[k]), REFIT_SHIFT)) >= 1
+        ]
+        self.refit(state, moved)
+        entry["keyframes_refit"] = len(moved)
         own["corrections"] += 1
         entry["closed"] = True
         self.context.logger.info(

@@ -224,9 +224,10 @@ class KeyframeBackEnd:
         if self.loops is not None:
             self.loops.after_keyframe(index, current, state)
 
-    def follow_correction(self, state: SLAMState) -> None:
-        """The map follows a loop correction (``mapping.loops.map``): a new field first
-        when ``rebuild``, then ``refit_passes`` over every keyframe, poses held."""
+    def follow_correction(self, state: SLAMState, moved: list[int]) -> None:
+        """The map follows a loop correction (``mapping.loops.map``) that moved the
+        keyframes ``moved`` (ids): refit = ``refit_passes`` over those keyframes, poses
+        held; rebuild = a new field, fitted from every keyframe."""
         loops = self.context.config.mapping.loops
         if loops.map == "rebuild":
             field = state.field
@@ -234,16 +235,22 @@ class KeyframeBackEnd:
                 raise RuntimeError("a loop correction before the field exists")
             state.field = new_field(self.context.config, field.bound, self.context.device)
             self.passes(state, 1, optimise_poses=False, first=True)
-        self.passes(state, loops.refit_passes, optimise_poses=False)
+            moved = list(range(len(state.keyframes)))
+        self.passes(state, loops.refit_passes, optimise_poses=False, among=moved)
 
     def passes(
-        self, state: SLAMState, passes: int, optimise_poses: bool, first: bool = False
+        self,
+        state: SLAMState,
+        passes: int,
+        optimise_poses: bool,
+        first: bool = False,
+        among: list[int] | None = None,
     ) -> None:
-        """``passes`` over every keyframe: mapping calls of ``mapping.iterations`` steps
-        on windows of ``mapping.window`` keyframes holding each keyframe once per pass,
-        in an order drawn from the run's generator; keyframe 0's pose held, the others'
-        refined with ``optimise_poses``. ``first``: one call with the first frame's
-        schedule (the map is new) on the first window instead."""
+        """``passes`` over every keyframe (or the ids ``among``): mapping calls of
+        ``mapping.iterations`` steps on windows of ``mapping.window`` keyframes holding
+        each once per pass, in an order drawn from the run's generator; keyframe 0's
+        pose held, the others' refined with ``optimise_poses``. ``first``: one call with
+        the first frame's schedule (the map is new) on the first window instead."""
         field, store = state.field, state.keyframes
         if field is None:
             raise RuntimeError("mapping passes before the field exists")
@@ -254,8 +261,9 @@ class KeyframeBackEnd:
         before = state.trajectory.poses[:count].detach().cpu().double().numpy()
         keyframes_before = before[list(frame_of)]
         for _ in range(passes):
-            order = torch.randperm(len(store), generator=generator, device=generator.device)
-            windows = torch.split(order.cpu(), config.window)
+            chosen = torch.tensor(list(range(len(store))) if among is None else among)
+            order = torch.randperm(len(chosen), generator=generator, device=generator.device)
+            windows = torch.split(chosen[order.cpu()], config.window)
             for window in windows[:1] if first else windows:
                 keyframes = sorted(window.tolist())
                 optimise = [optimise_poses and k != 0 for k in keyframes]

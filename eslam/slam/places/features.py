@@ -18,6 +18,7 @@ features with their depth, matching, and a camera pose from matches.
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 from typing import Any
 
@@ -141,9 +142,13 @@ def rigid_fit(camera: np.ndarray, world: np.ndarray) -> np.ndarray:
     """(4, 4) the rigid motion T = [R t] minimising sum |R q_i + t - p_i|^2 over (N, 3)
     ``camera`` points q and ``world`` points p, N >= 3 (Arun, Huang and Blostein, PAMI
     1987): R solves Wahba's problem on the centred points
-    (``scipy.spatial.transform.Rotation.align_vectors``), t = mean(p) - R mean(q)."""
+    (``scipy.spatial.transform.Rotation.align_vectors``), t = mean(p) - R mean(q).
+    Nearly collinear points leave R poorly defined: scipy's warning about it is
+    silenced, as RANSAC's inlier count judges such a sample anyway."""
     q_mean, p_mean = camera.mean(axis=0), world.mean(axis=0)
-    rotation, _ = Rotation.align_vectors(world - p_mean, camera - q_mean)
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message="Optimal rotation is not uniquely")
+        rotation, _ = Rotation.align_vectors(world - p_mean, camera - q_mean)
     pose = np.eye(4)
     pose[:3, :3] = rotation.as_matrix()
     pose[:3, 3] = p_mean - pose[:3, :3] @ q_mean
