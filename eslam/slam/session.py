@@ -36,6 +36,7 @@ from eslam.errors import ConfigError, ESLAMError, InputError, RunInterrupted
 from eslam.field.plane_sampling import PLANE_SAMPLINGS
 from eslam.slam.context import RunContext
 from eslam.slam.loop import RunLoop
+from eslam.slam.loops.pose_graph import import_gtsam
 from eslam.slam.mapping.backend import BackEnd, make_back_end
 from eslam.slam.run.folder import (
     absolute_data_path,
@@ -235,6 +236,8 @@ def run_slam(
     config = resolve_config(config)
     device = resolve_device(config.device)
     PLANE_SAMPLINGS.check(config.field.plane_sampling, device)
+    if config.mapping.loops.enabled:
+        import_gtsam()  # a missing extra is named before the run folder is touched
     if resume:
         check_resumable(config, source, Path(run_dir))
     source, sequence = _open_input(config, source)

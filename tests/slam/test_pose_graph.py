@@ -4,12 +4,15 @@ from __future__ import annotations
 
 import math
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from eslam.errors import ConfigError
 from eslam.slam.loops.pose_graph import Edge, carry_poses, relative_pose, solve_pose_graph
+from eslam.slam.session import run_slam
+from tests.conftest import tiny_config
 
 pytest.importorskip("gtsam", reason="the loops extra (GTSAM) is not installed")
 
@@ -82,10 +85,16 @@ def test_frames_move_with_their_node() -> None:
     np.testing.assert_allclose(relative_pose(after[1], moved), relative_pose(before[1], frame))
 
 
-def test_bad_edges_and_a_missing_gtsam_are_named(monkeypatch: pytest.MonkeyPatch) -> None:
+def test_bad_edges_and_a_missing_gtsam_are_named(
+    monkeypatch: pytest.MonkeyPatch, tiny_sequence: Path, tmp_path: Path
+) -> None:
     start = np.stack([_pose(0.0), _pose(1.0)])
     with pytest.raises(ValueError, match=r"edge \(0, 2\)"):
         solve_pose_graph(start, [_edge(0, 2, _pose(1.0))])
     monkeypatch.setitem(sys.modules, "gtsam", None)
     with pytest.raises(ConfigError, match=r'pip install "eslam\[loops\]"'):
         solve_pose_graph(start, [_edge(0, 1, _pose(1.0))])
+    # a run with loop closure on is refused before its folder is written
+    with pytest.raises(ConfigError, match="needs GTSAM"):
+        run_slam(tiny_config(tiny_sequence, "mapping.loops.enabled=true"), tmp_path / "run")
+    assert not (tmp_path / "run").exists()
