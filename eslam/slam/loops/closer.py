@@ -97,7 +97,8 @@ class LoopCloser:
             self.places = PlaceIndex(store)
         generator = torch.Generator().manual_seed(index)
         candidates = by_pose(store, current, eligible, self.config, generator)
-        unseen = [k for k in eligible if k not in {c.keyframe for c in candidates}]
+        taken = {c.keyframe for c in candidates}
+        unseen = [k for k in eligible if k not in taken]
         alike, unmatched = by_appearance(self.places, current, unseen, self.config, index)
         candidates += alike
         for k, similarity in unmatched:
