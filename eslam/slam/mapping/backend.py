@@ -260,10 +260,12 @@ class KeyframeBackEnd:
         count = state.next_frame
         before = state.trajectory.poses[:count].detach().cpu().double().numpy()
         keyframes_before = before[list(frame_of)]
+        chosen = list(range(len(store))) if among is None else among
+        if not chosen:  # a correction that moved no keyframe far enough to refit
+            return
         for _ in range(passes):
-            chosen = torch.tensor(list(range(len(store))) if among is None else among)
             order = torch.randperm(len(chosen), generator=generator, device=generator.device)
-            windows = torch.split(chosen[order.cpu()], config.window)
+            windows = torch.split(torch.tensor(chosen)[order.cpu()], config.window)
             for window in windows[:1] if first else windows:
                 keyframes = sorted(window.tolist())
                 optimise = [optimise_poses and k != 0 for k in keyframes]
