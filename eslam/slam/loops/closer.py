@@ -187,8 +187,15 @@ class LoopCloser:
             entry["accepted"] = True
         return entry
 
-    def _close(self, index: int, current: int, state: SLAMState, best) -> None:
-        """Add the best accepted loop's edge; solve and refit when it corrects enough."""
+    def _close(
+        self,
+        index: int,
+        current: int,
+        state: SLAMState,
+        best: tuple[float, Candidate, IcpResult, dict],
+    ) -> None:
+        """Add the best accepted loop's edge (``best``: inlier share, candidate, its
+        registration, its loops.json entry); solve and refit when it corrects enough."""
         _, candidate, result, entry = best
         own = self.own(state)
         store = state.keyframes
@@ -213,8 +220,8 @@ class LoopCloser:
         trajectory = state.trajectory
         count = state.next_frame
         before = trajectory.poses[:count].detach().cpu().double().numpy()
-        moved = carry_poses(before, anchors(frames, count), poses, solution.poses)
-        trajectory.set_poses(list(range(count)), torch.from_numpy(moved))
+        carried = carry_poses(before, anchors(frames, count), poses, solution.poses)
+        trajectory.set_poses(list(range(count)), torch.from_numpy(carried))
         shift, turn = pose_difference(poses[current], solution.poses[current])
         moved = [
             k
@@ -244,7 +251,7 @@ class LoopCloser:
     def _edges(self, poses: np.ndarray, frames: tuple[int, ...], loops: list) -> list[Edge]:
         """Odometry edges between consecutive keyframes (as estimated now) and the loop
         edges whose keyframes are in the store."""
-        rotation, translation = self.context.config.mapping.loops.odometry_sigma
+        rotation, translation = self.config.odometry_sigma
         edges = [
             Edge(k, k + 1, np.linalg.solve(poses[k], poses[k + 1]), rotation, translation)
             for k in range(len(poses) - 1)
