@@ -26,10 +26,10 @@ import numpy as np
 import torch
 
 from eslam.cli.args import image_size
-from eslam.config import load_config
 from eslam.slam.session import run_slam
-from eslam.synthetic import SynthConfig, read_synthetic_bound
+from eslam.synthetic import SynthConfig
 from eslam.synthetic.edits import SequenceEdit, return_after_blind, write_edited_sequence
+from eslam.synthetic.runs import synthetic_run_config
 from eslam.workflows.demo import DEMO_CONFIG
 
 PRESETS = {"on": (), "off": ("tracking.recovery.enabled=false",)}
@@ -83,16 +83,7 @@ def main(argv: list[str] | None = None) -> None:
     ]
     for name in args.settings:
         settings = PRESETS.get(name, tuple(name.split(",")))
-        config = load_config(
-            args.config,
-            [
-                f"data.path={data}",
-                f"scene.bound={read_synthetic_bound(data)}",
-                "output.mesh=false",
-                "output.progress=false",
-                *settings,
-            ],
-        )
+        config = synthetic_run_config(args.config, data, *settings)
         run_dir = args.out / f"run-{len(lines) - 2}"
         metrics = run_slam(config, run_dir, overwrite=True).metrics
         lines.append(row(name, run_dir, args.mapped + args.blind, metrics))

@@ -41,10 +41,12 @@ from pathlib import Path  # noqa: E402
 import torch  # noqa: E402
 
 sys.path[:0] = [str(Path(__file__).resolve().parent), str(Path(__file__).resolve().parents[1])]
-from _machine import REPO, machine_lines  # noqa: E402
+from _machine import REPO, add_device_argument, machine_lines  # noqa: E402
 from gpu_runs import RUNS, VARIANTS, RunSpec, row_cells, run_one, table_head  # noqa: E402
 
 from eslam.atomic import write_text  # noqa: E402
+from eslam.config.device import resolve_device  # noqa: E402
+from eslam.errors import ConfigError  # noqa: E402
 
 
 @dataclass
@@ -247,7 +249,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--data-root", type=Path, required=True)
     parser.add_argument("--out", type=Path, required=True)
-    parser.add_argument("--device", default="cuda", help="cuda (default), cuda:N or cpu")
+    add_device_argument(parser)  # auto: CUDA where there is one
     parser.add_argument("--threads", type=int, default=4, help="torch CPU threads per run")
     parser.add_argument(
         "--budget-s", type=float, default=480.0, help="seconds for all steps (default 480)"
@@ -267,11 +269,11 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
             f"gpu_check.py: --data-root {args.data_root} is not a folder "
             "(make one with benchmarks/gpu_pack.py)\n",
         )
-    if torch.device(args.device).type == "cuda" and not torch.cuda.is_available():
+    try:
+        args.device = str(resolve_device(args.device))
+    except ConfigError as error:
         parser.exit(
-            2,
-            f"gpu_check.py: --device {args.device} but torch sees no CUDA device "
-            "(use --device cpu --smoke for the CPU parts)\n",
+            2, f"gpu_check.py: {error} (without CUDA, --device cpu --smoke runs the CPU parts)\n"
         )
     return args
 

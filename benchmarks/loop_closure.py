@@ -27,9 +27,9 @@ import numpy as np
 import torch
 
 from eslam.cli.args import image_size
-from eslam.config import load_config
 from eslam.slam.session import run_slam
-from eslam.synthetic import SynthConfig, read_synthetic_bound, write_synthetic_sequence
+from eslam.synthetic import SynthConfig, write_synthetic_sequence
+from eslam.synthetic.runs import synthetic_run_config
 from eslam.synthetic.scenes import build_scene
 from eslam.synthetic.trajectory import loop_lap_frames
 from eslam.workflows.demo import DEMO_CONFIG
@@ -98,16 +98,7 @@ def main(argv: list[str] | None = None) -> None:
     lines = [head + " |", rule + "|"]
     for index, name in enumerate(args.settings):
         settings = PRESETS.get(name, tuple(name.split(",")))
-        config = load_config(
-            args.config,
-            [
-                f"data.path={data}",
-                f"scene.bound={read_synthetic_bound(data)}",
-                f"output.mesh={str(args.mesh).lower()}",
-                "output.progress=false",
-                *settings,
-            ],
-        )
+        config = synthetic_run_config(args.config, data, *settings, mesh=args.mesh)
         run_dir = args.out / f"run-{index}"
         start = time.perf_counter()
         metrics = run_slam(config, run_dir, overwrite=True).metrics

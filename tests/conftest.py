@@ -99,15 +99,10 @@ def tiny_config(sequence: Path, *extra: str):
 def demo_config(sequence: Path, *extra: str):
     """The demo config (its CPU preset, whole) on the synthetic ``sequence`` with its
     known bound, no mesh and no progress bar."""
-    from eslam.config import load_config
-    from eslam.synthetic import read_synthetic_bound
+    from eslam.synthetic.runs import synthetic_run_config
     from eslam.workflows.demo import DEMO_CONFIG
 
-    settings = ["output.mesh=false", "output.progress=false"]
-    bound = read_synthetic_bound(sequence)
-    return load_config(
-        DEMO_CONFIG, [f"data.path={sequence}", f"scene.bound={bound}", *settings, *extra]
-    )
+    return synthetic_run_config(DEMO_CONFIG, sequence, *extra)
 
 
 @pytest.fixture(scope="session")
