@@ -16,7 +16,10 @@ import torch
 
 from eslam.testing.tiny import TINY_SETTINGS
 
-torch.set_num_threads(int(os.environ.get("ESLAM_TEST_THREADS", "2")))
+# Two threads per test, or one per worker when pytest-xdist runs tests side by side
+# (`pytest -n 2`, README): small tensors gain little from a second thread.
+_DEFAULT_THREADS = "1" if os.environ.get("PYTEST_XDIST_WORKER") else "2"
+torch.set_num_threads(int(os.environ.get("ESLAM_TEST_THREADS", _DEFAULT_THREADS)))
 
 # Without CUDA, plane_sampling: triton's tests run its kernels on CPU tensors in Triton's
 # interpreter. Triton reads TRITON_INTERPRET as it decorates kernels, its own library

@@ -571,6 +571,11 @@ class MappingConfig:
     ``every`` frames, mapped with a window of earlier ones)."""
     every: int = 4
     """Map every k-th frame (plus the last); every mapped frame becomes a keyframe."""
+    concurrent: bool | None = None
+    """Map beside the tracker (eslam/slam/mapping/concurrent.py, docs/live.md): mapping calls
+    run in a thread while frames are tracked on the last whole map, a newer keyframe
+    replacing one still waiting. null = on in real time (``--realtime``, a live camera),
+    off for recorded data (in turn: deterministic); a resumed run maps in turn."""
     keyframe_coverage: float = 0.0
     """Also make a tracked frame a keyframe when less than this share of its pixels lay
     in observed space (needs ``tracking.observed_only``, which measures the share): the
@@ -646,6 +651,11 @@ class MappingConfig:
             raise ValueError(f"first_rays must be >= 1 or null, got {self.first_rays}")
         if not 0.0 < self.first_lr_decay <= 1.0:
             raise ValueError(f"first_lr_decay must be in (0, 1], got {self.first_lr_decay}")
+        if self.concurrent and self.loops.enabled:
+            raise ValueError(
+                "concurrent mapping does not close loops yet: set mapping.concurrent=false "
+                "or mapping.loops.enabled=false"
+            )
 
 
 @dataclass

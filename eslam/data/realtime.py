@@ -122,7 +122,7 @@ class LatestFrameReader(ReaderThread):
         self._clock = clock
         self._ready = threading.Condition()
         self._stop = threading.Event()
-        self._slot: tuple[int, Frame] | None = None
+        self._slot: tuple[int, Frame, float] | None = None
         self._ended = False
         self._failure: BaseException | None = None
         self._received = 0
@@ -131,6 +131,7 @@ class LatestFrameReader(ReaderThread):
         self._last_arrival = 0.0
         self._closed_at: float | None = None
         self.source_indices: list[int] = []
+        self._arrivals: list[float] = []  # when each frame handed to the loop arrived
         self.thread = threading.Thread(target=self._read, name="eslam-realtime", daemon=True)
 
     def _read(self) -> None:
@@ -173,9 +174,9 @@ class LatestFrameReader(ReaderThread):
         with self._ready:
             if self._slot is not None:
                 self._replaced += 1
-            self._slot = (position, frame)
-            self._received += 1
             self._last_arrival = self._clock()
+            self._slot = (position, frame, self._last_arrival)
+            self._received += 1
             if self._first_arrival is None:
                 self._first_arrival = self._last_arrival
             self._ready.notify_all()
@@ -188,14 +189,20 @@ class LatestFrameReader(ReaderThread):
             while self._slot is None and not self._ended and self._failure is None:
                 self._ready.wait(_POLL_S)
             if self._slot is not None:
-                position, frame = self._slot
+                position, frame, arrival = self._slot
                 self._slot = None
                 self.source_indices.append(position)
+                self._arrivals.append(arrival)
                 return frame
             if self._failure is not None:
                 failure, self._failure = self._failure, None
                 raise failure
             raise StopIteration
+
+    def age_s(self, delivered: int) -> float:
+        """Seconds since the ``delivered``-th frame handed to the loop (0-based) arrived:
+        called when its pose is done, how far the run lags behind the camera."""
+        return self._clock() - self._arrivals[delivered]
 
     def counts(self) -> StreamCounts:
         """The counts so far (safe to call from any thread)."""

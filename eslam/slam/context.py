@@ -30,6 +30,11 @@ class RunContext:
         observers: told about mapping calls (and everything else the loop reports).
         logger: the run's log, for messages no observer can give (bound estimates).
         source: the input's name, for messages.
+        concurrent_mapping: the mapping back end runs beside the tracker
+            (``mapping.concurrent`` as the session resolved it: on in real time when not
+            set, off for a resumed run).
+        real_time: frames arrive at the camera's pace and are dropped while the run is
+            busy (a live source, ``data.realtime``).
     """
 
     config: ESLAMConfig
@@ -39,6 +44,8 @@ class RunContext:
     observers: RunObserver
     logger: logging.Logger
     source: str
+    concurrent_mapping: bool = False
+    real_time: bool = False
 
     @classmethod
     def build(
@@ -49,7 +56,19 @@ class RunContext:
         observers: RunObserver,
         logger: logging.Logger,
         source: str,
+        concurrent_mapping: bool = False,
+        real_time: bool = False,
     ) -> RunContext:
         """A context whose ray directions are computed from ``intrinsics`` once."""
         directions = camera_directions(intrinsics, device)
-        return cls(config, device, intrinsics, directions, observers, logger, source)
+        return cls(
+            config,
+            device,
+            intrinsics,
+            directions,
+            observers,
+            logger,
+            source,
+            concurrent_mapping,
+            real_time,
+        )

@@ -93,6 +93,7 @@ class RunLoop:
                 interrupted = True
                 break
         close_iterator(iterator)  # a reader thread stops taking frames it cannot process
+        self.back_end.settle(state)  # mapping under way (beside the tracker) completes
         if complete:
             mark = self._mark()
             try:

@@ -175,6 +175,19 @@ def _open_input(
     return None, sequence
 
 
+def concurrent_mapping(
+    config: ESLAMConfig, real_time: bool, resume: bool, logger: logging.Logger
+) -> bool:
+    """Whether the run maps beside the tracker: ``mapping.concurrent``, or when it is not
+    set, whether the run is in real time; a resumed run maps in turn (and says so)."""
+    wanted = config.mapping.concurrent
+    concurrent = real_time if wanted is None else wanted
+    if concurrent and resume:
+        logger.info("a resumed run maps in turn (mapping.concurrent applies to new runs)")
+        return False
+    return concurrent
+
+
 def check_resumable(config: ESLAMConfig, source: FrameSource | None, run_dir: Path) -> None:
     """Refuse to resume a real-time run: which frames it processed depended on timing (the
     rest were dropped), so no frame "follows its checkpoint" (docs/live.md).
@@ -271,8 +284,9 @@ def run_slam(
                 logs = [LogObserver(run_logger), FrameLogObserver(run_logger)]
                 everyone = Observers([writer, *logs, progress, *reports, *observers])
                 camera = state.keyframes.intrinsics  # the camera the keyframes are stored with
+                concurrent = concurrent_mapping(config, real_time, resume, run_logger)
                 context = RunContext.build(
-                    config, device, camera, everyone, run_logger, source.name
+                    config, device, camera, everyone, run_logger, source.name, concurrent, real_time
                 )
                 front_end, back_end = components.build(context)
                 loop = RunLoop(state, front_end, back_end, everyone, real_time)

@@ -157,7 +157,9 @@ class CtrlC(RunObserverBase):
 
 
 def test_ctrl_c_ends_a_live_run_cleanly(tiny_sequence: Path, tmp_path: Path) -> None:
-    config = tiny_config(tiny_sequence, *QUICK)
+    # mapping in turn: Ctrl-C lands inside a mapping call (test_concurrent_mapping.py
+    # presses it in a run that maps beside the tracker)
+    config = tiny_config(tiny_sequence, *QUICK, "mapping.concurrent=false")
     sequence = open_sequence(config.data)
     closed = threading.Event()
 

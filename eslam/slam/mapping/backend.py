@@ -21,6 +21,7 @@ the call when the frame fails half way (:meth:`KeyframeBackEnd.rollback`).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Protocol
 
@@ -42,11 +43,44 @@ from eslam.slam.mapping.bounds_policy import (
 )
 from eslam.slam.mapping.keyframe_views import KeyframeViews
 from eslam.slam.mapping.keyframes import KeyframeSchedule
-from eslam.slam.mapping.mapper import MappingSettings, mapping_schedule
+from eslam.slam.mapping.mapper import (
+    MappingResult,
+    MappingSchedule,
+    MappingSettings,
+    mapping_schedule,
+)
 from eslam.slam.run.observers import MappingDone, MappingStep
 from eslam.slam.state import FrameMark, SLAMState, new_field
 from eslam.slam.tracking.frontend import TrackedFrame
+from eslam.slam.views import View
 from eslam.types import Frame
+
+
+@dataclass(frozen=True, eq=False)
+class MappingJob:
+    """One mapping call, ready to run (:meth:`KeyframeBackEnd.prepare`).
+
+    Attributes:
+        index: the frame made a keyframe.
+        keyframe: its id in the keyframe store.
+        frame: the frame itself.
+        window: the frame indices of the window's keyframes (the new one included).
+        views: the window's keyframes as Views.
+        poses: (W, 4, 4) their poses when the call was prepared, on the run's device.
+        optimise: per window keyframe, whether its pose is refined (the oldest is held).
+        schedule: iterations, rates, rays (the first call's for the map's first keyframe).
+        first: the map's first keyframe.
+    """
+
+    index: int
+    keyframe: int
+    frame: Frame
+    window: tuple[int, ...]
+    views: list[View]
+    poses: torch.Tensor
+    optimise: list[bool]
+    schedule: MappingSchedule
+    first: bool
 
 
 class BackEnd(Protocol):
@@ -67,6 +101,11 @@ class BackEnd(Protocol):
     def finish(self, state: SLAMState, last: Frame | None) -> None:
         """The stream ended with ``last`` (frame ``state.next_frame - 1``): map what is
         left to map."""
+        ...
+
+    def settle(self, state: SLAMState) -> None:
+        """The run stops (the stream ended, or it was stopped): finish the mapping work
+        under way, so that a checkpoint holds whole mapping calls."""
         ...
 
     def rollback(self, state: SLAMState, mark: FrameMark) -> None:
@@ -121,6 +160,9 @@ class KeyframeBackEnd:
         share = tracked.kept.get("observed")
         return tracked.tracked and share is not None and share < coverage
 
+    def settle(self, state: SLAMState) -> None:
+        """Nothing is under way between frames: every call ran in turn."""
+
     def finish(self, state: SLAMState, last: Frame | None) -> None:
         self._map_last(state, last)
         passes = self.context.config.mapping.loops.final_passes
@@ -174,13 +216,34 @@ class KeyframeBackEnd:
         field = state.field
         if field is None:
             raise RuntimeError("mapping before the field exists")
-        config, source = self.context.config, self.context.source
-        # a wrong depth unit mid-stream (a live source, a mixed folder) must not be mapped
-        self.depth_check.check(frame.depth, source, f"frame {index} (a keyframe)")
         self._before = (
             {k: v.detach().clone() for k, v in field.state_dict().items()},
             state.trajectory.poses.clone(),
         )
+        job = self.prepare(frame, index, state, field)
+        observers = self.context.observers
+
+        def progress(done: int) -> None:
+            observers.on_mapping_step(MappingStep(index, done, job.schedule.iterations, job.first))
+
+        progress(0)
+        result = self.mapper.map(
+            field,
+            job.views,
+            job.poses,
+            job.optimise,
+            job.schedule,
+            generator=state.generator,
+            on_step=progress,
+        )
+        self.apply(job, result, state)
+
+    def prepare(self, frame: Frame, index: int, state: SLAMState, field: SceneField) -> MappingJob:
+        """Make frame ``index`` a keyframe: check its depth, add it to the store, grow
+        ``field``'s bound to hold it, choose its window; return the mapping call to run."""
+        config, source = self.context.config, self.context.source
+        # a wrong depth unit mid-stream (a live source, a mixed folder) must not be mapped
+        self.depth_check.check(frame.depth, source, f"frame {index} (a keyframe)")
         store = state.keyframes
         current = store.add(frame, index)
         own = state.component("back_end")
@@ -195,34 +258,32 @@ class KeyframeBackEnd:
             self.context.logger,
         )
         window = state.window.select(store, current, state.generator)
-        views = self._views(state).views(window)
         frame_of = store.frame_indices
         oldest = min(window, key=lambda k: frame_of[k])
-        optimise = [config.mapping.optimise_poses and k != oldest for k in window]
         first = len(store) == 1
-        schedule = mapping_schedule(config.mapping, first=first)
-        observers = self.context.observers
-
-        def progress(done: int) -> None:
-            observers.on_mapping_step(MappingStep(index, done, schedule.iterations, first))
-
-        progress(0)
-        result = self.mapper.map(
-            field,
-            views,
-            store.poses[window].to(self.context.device),
-            optimise,
-            schedule,
-            generator=state.generator,
-            on_step=progress,
+        return MappingJob(
+            index=index,
+            keyframe=current,
+            frame=frame,
+            window=tuple(frame_of[k] for k in window),
+            views=self._views(state).views(window),
+            poses=store.poses[window].to(self.context.device),
+            optimise=[config.mapping.optimise_poses and k != oldest for k in window],
+            schedule=mapping_schedule(config.mapping, first=first),
+            first=first,
         )
-        moved = [i for i, flag in enumerate(optimise) if flag]
+
+    def apply(self, job: MappingJob, result: MappingResult, state: SLAMState) -> None:
+        """The mapping call ``job`` returned ``result``: its refined poses go to the
+        trajectory, the observers hear of it, loop closure looks at the new keyframe."""
+        moved = [i for i, flag in enumerate(job.optimise) if flag]
         if moved:
-            state.trajectory.set_poses([frame_of[window[i]] for i in moved], result.poses[moved])
-        window_frames = tuple(frame_of[k] for k in window)
-        observers.on_mapping(MappingDone(index, window_frames, schedule.iterations, result.loss))
+            state.trajectory.set_poses([job.window[i] for i in moved], result.poses[moved])
+        self.context.observers.on_mapping(
+            MappingDone(job.index, job.window, job.schedule.iterations, result.loss)
+        )
         if self.loops is not None:
-            self.loops.after_keyframe(index, current, state)
+            self.loops.after_keyframe(job.index, job.keyframe, state)
 
     def follow_correction(self, state: SLAMState, moved: list[int]) -> None:
         """The map follows a loop correction (``mapping.loops.map``) that moved the
@@ -289,7 +350,19 @@ class KeyframeBackEnd:
 
 BACK_ENDS: Registry[BackEnd] = Registry("mapping back end", "mapping.back_end")
 """Mapping back ends by ``mapping.back_end``; a factory takes the run's :class:`RunContext`."""
-BACK_ENDS.register("keyframes", KeyframeBackEnd)
+
+
+def keyframe_back_end(context: RunContext) -> BackEnd:
+    """The paper's back end, its calls beside the tracker with ``concurrent_mapping``
+    (:mod:`eslam.slam.mapping.concurrent_mapping`)."""
+    if context.concurrent_mapping:
+        from eslam.slam.mapping.concurrent_mapping import ConcurrentBackEnd
+
+        return ConcurrentBackEnd(context)
+    return KeyframeBackEnd(context)
+
+
+BACK_ENDS.register("keyframes", keyframe_back_end)
 
 
 def make_back_end(context: RunContext) -> BackEnd:

@@ -17,6 +17,7 @@ import numpy as np
 
 from eslam.data.realtime import LatestFrameReader
 from eslam.evaluate.trajectory import absolute_trajectory_error
+from eslam.slam.mapping.concurrent_mapping import COMPONENT as CONCURRENT
 from eslam.slam.run.observers import FrameDone, MappingStep, RunEnd, RunObserverBase, RunStart
 from eslam.slam.state import failed_stretch
 
@@ -36,7 +37,9 @@ def finite_ate_pairs(estimated: np.ndarray, gt: np.ndarray) -> np.ndarray:
 class ProgressObserver(RunObserverBase):
     """A tqdm bar over the frames (total unknown for a live stream) and one over the first
     mapping call's iterations; does nothing when off, not even reading the device
-    (module doc). A real-time run's bar also shows the frames dropped so far.
+    (module doc). A real-time run's bar also shows the frames dropped so far and how far
+    behind the camera the last pose came (seconds), a concurrent run's the keyframes
+    being mapped or waiting.
 
     Args:
         enabled: draw the bars.
@@ -105,6 +108,10 @@ class ProgressObserver(RunObserverBase):
         postfix = dict(self.postfix)
         if self.stream is not None:
             postfix["dropped"] = str(self.stream.counts().replaced)
+            postfix["lag_s"] = f"{self.stream.age_s(frame.index):.1f}"  # behind the camera
+        concurrent = self.state.components.get(CONCURRENT)
+        if concurrent is not None:  # keyframes mapping or waiting beside the tracker
+            postfix["map_queue"] = str(concurrent.get("queue", 0))
         lost = failed_stretch(self.state.tracking_quality)
         if lost:
             postfix["lost_frames"] = str(lost)  # the camera is lost: failed frames in a row

@@ -10,19 +10,27 @@ from __future__ import annotations
 
 import logging
 
+import numpy as np
+
 from eslam.data.realtime import LatestFrameReader, StreamCounts
 from eslam.slam.run.observers import FrameDone, RunEnd, RunObserverBase
 
 
-def stream_metrics(counts: StreamCounts, processed: int) -> dict:
+def stream_metrics(counts: StreamCounts, processed: int, lags_s: list[float]) -> dict:
     """metrics.json's real-time keys: frames received from the stream, dropped (received
     but not processed: replaced by a newer frame while the system was busy, or still
-    waiting when the run ended), and the stream's rate; ``processed`` frames were done."""
-    return {
+    waiting when the run ended), and the stream's rate; ``processed`` frames were done.
+    With ``lags_s`` (per processed frame, seconds from its arrival to its pose): the
+    tracker's lag behind the camera, mean and largest."""
+    metrics = {
         "frames_received": counts.received,
         "frames_dropped": counts.received - processed,
         "received_fps": counts.received_fps,
     }
+    if lags_s:
+        metrics["tracking_lag_s_mean"] = float(np.mean(lags_s))
+        metrics["tracking_lag_s_max"] = float(np.max(lags_s))
+    return metrics
 
 
 class StreamLog(RunObserverBase):

@@ -35,6 +35,7 @@ from eslam.io.run_dir import RunDirectory, write_json
 from eslam.io.trajectory import write_tum_trajectory
 from eslam.slam.loops.closer import COMPONENT as LOOPS
 from eslam.slam.loops.closer import loop_metrics
+from eslam.slam.mapping.concurrent_mapping import concurrency_metrics
 from eslam.slam.run.observers import FrameDone, RunEnd, RunObserverBase, RunStart
 from eslam.slam.run.progress import finite_ate_pairs
 from eslam.slam.run.resources import PeakMemory
@@ -201,6 +202,7 @@ class RunWriter(RunObserverBase):
         self._began = 0.0
         self._first_done: float | None = None
         self._last_done = 0.0
+        self.lags_s: list[float] = []  # real time: per frame, its age when its pose was done
 
     def on_start(self, start: RunStart) -> None:
         self.state = start.state
@@ -215,6 +217,8 @@ class RunWriter(RunObserverBase):
 
     def on_frame(self, frame: FrameDone) -> None:
         self._last_done = self.clock()
+        if self.stream is not None:  # a real-time run starts at frame 0: index = delivered
+            self.lags_s.append(self.stream.age_s(frame.index))
         if self._first_done is None:
             self._first_done = self._last_done
         # before the first frame with depth nothing is learnt: a resume must start at 0
@@ -254,8 +258,9 @@ class RunWriter(RunObserverBase):
         if frames == 0:  # a finished run resumed again: its wall-clock keys stay
             speed = {k: v for k, v in speed.items() if k == "fps_tracking"}
         metrics.update(speed)
+        metrics.update(concurrency_metrics(state, speed.get("wall_s", 0.0)))
         if self.stream is not None:
-            metrics.update(stream_metrics(self.stream.counts(), frames))
+            metrics.update(stream_metrics(self.stream.counts(), frames, self.lags_s))
         if self.resumed_at is not None:
             previous = previous_metrics(self.run)
             if state.next_frame == self.resumed_at:
@@ -306,6 +311,7 @@ class RunWriter(RunObserverBase):
                 timings[key] = [None if np.isnan(v) else float(v) for v in column]
         if self.stream is not None:  # no resume: the run's frames are this process's
             timings["source_index"] = self.stream.source_indices[: state.next_frame]
+            timings["lag_s"] = self.lags_s[: state.next_frame]
         write_json(self.run.timings, timings)
         if LOOPS in state.components:  # loop closure is on
             write_json(self.run.loops, state.components[LOOPS]["entries"])

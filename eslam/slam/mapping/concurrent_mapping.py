@@ -1,0 +1,329 @@
+"""Mapping beside tracking (``mapping.concurrent``): the back end's calls in a thread.
+
+:class:`ConcurrentBackEnd` chooses keyframes as :class:`~eslam.slam.mapping.backend.
+KeyframeBackEnd` does, but runs each mapping call in a worker thread (on a GPU, on a CUDA
+stream of its own: :class:`MappingWorker`) while the run loop goes on tracking. What the
+two threads touch is owned by one of them at a time and handed over explicitly:
+
+- The tracker reads ``state.field``: the map as of the last *completed* call. The worker
+  maps a field of its own (the working field). When a call completes, the run loop's
+  thread (between two frames, so never while the tracker reads) copies the working field
+  into ``state.field`` whole (in place, or a new field when the call grew the bound),
+  writes the call's refined keyframe poses to the trajectory and tells the observers.
+- The run loop's thread prepares each call while the worker is idle (the keyframe added
+  to the store, the bound grown, the window chosen, its views built:
+  :meth:`~eslam.slam.mapping.backend.KeyframeBackEnd.prepare`) and hands it over; the
+  worker gives back the result, or its error, through a future.
+- One call runs at a time. A keyframe that comes while one runs waits. When another
+  comes while one waits: in real time the newer replaces the waiting one (the mapper
+  cannot keep up, and the newest view matters most; replacements are counted and log.txt
+  says when the first happens); on recorded data the tracker waits for the mapper, so
+  every keyframe is mapped and the tracker is at most two keyframes ahead of the map.
+
+The map's first keyframe: its TSDF warm start (``mapping.first_warm_start: tsdf``) runs
+before the hand-over and the warm-started map goes to the tracker at once, so tracking
+starts while the first call's rendering steps go on; without a warm start the tracker
+waits for the first call (there is no map to track on before it).
+
+A call is never cut half way: at the end of the stream, when the run stops
+(:meth:`ConcurrentBackEnd.settle`) and when a frame fails (:meth:`~ConcurrentBackEnd.
+rollback`) the call in flight is waited for, so a checkpoint holds whole calls only (and
+at the end of the stream or a stop, the waiting keyframe mapped too). Calls, their busy
+time, replacements and the longest queue are kept in ``components["concurrent_mapping"]``
+and reported in metrics.json (:func:`concurrency_metrics`).
+"""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+import time
+from collections.abc import Callable
+from concurrent.futures import Future, ThreadPoolExecutor
+from dataclasses import dataclass
+
+import torch
+
+from eslam.field.scene_field import SceneField
+from eslam.slam.context import RunContext
+from eslam.slam.mapping.backend import KeyframeBackEnd, MappingJob
+from eslam.slam.mapping.bounds_policy import check_some_depth
+from eslam.slam.mapping.mapper import MappingResult, warm_start_window
+from eslam.slam.state import FrameMark, SLAMState
+from eslam.slam.tracking.frontend import TrackedFrame
+from eslam.types import Frame
+
+COMPONENT = "concurrent_mapping"
+"""The back end's counts in ``state.components``: calls, busy_s, replaced, queue (after
+the last frame: in flight plus waiting), queue_max."""
+
+_GRID_KEYS = ("bound", "vertices", "window")
+"""Field entries that fix its layout: equal in both fields, the copy can be in place."""
+
+
+class MappingWorker:
+    """One thread that runs mapping calls one at a time; on CUDA, on a stream of its own
+    that first waits for the work the run loop's stream queued before the hand-over.
+
+    Args:
+        device: the run's device.
+    """
+
+    def __init__(self, device: torch.device) -> None:
+        self.executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="eslam-mapping")
+        self.stream = torch.cuda.Stream(device) if device.type == "cuda" else None
+
+    def submit(self, call: Callable[[], MappingResult]) -> Future[MappingResult]:
+        """Run ``call`` in the thread; its result (or error) comes back through the future
+        once its device work is done."""
+        ready = None
+        if self.stream is not None:
+            ready = torch.cuda.Event()
+            ready.record()  # the views and poses the run loop's stream built for the call
+        return self.executor.submit(self._run, call, ready)
+
+    def _run(self, call: Callable[[], MappingResult], ready: torch.cuda.Event | None):
+        if self.stream is None:
+            return call()
+        with torch.cuda.stream(self.stream):
+            self.stream.wait_event(ready)
+            result = call()
+        self.stream.synchronize()
+        return result
+
+    def close(self) -> None:
+        """Let the thread end (a call in flight finishes first)."""
+        self.executor.shutdown(wait=True)
+
+
+@dataclass(frozen=True, eq=False)
+class Flight:
+    """A mapping call handed to the worker.
+
+    Attributes:
+        job: the call.
+        future: its result.
+        handed_at: the frame being processed when it was handed over.
+        started: when (seconds, ``time.perf_counter``).
+    """
+
+    job: MappingJob
+    future: Future[MappingResult]
+    handed_at: int
+    started: float
+
+
+def same_layout(a: SceneField, b: SceneField) -> bool:
+    """Whether fields ``a`` and ``b`` have the same bound and plane grids (so one's
+    values can be copied into the other's tensors)."""
+    left, right = a.state_dict(), b.state_dict()
+    if left.keys() != right.keys():
+        return False
+    for key, value in left.items():
+        if value.shape != right[key].shape:
+            return False
+        if key.endswith(_GRID_KEYS) and not torch.equal(value, right[key]):
+            return False
+    return True
+
+
+def copy_field(source: SceneField, target: SceneField | None) -> SceneField:
+    """``source``'s values in ``target`` (copied in place when the layouts agree, so
+    whoever holds ``target`` sees the new map), else in a copy of ``source``."""
+    if target is None or not same_layout(source, target):
+        return copy.deepcopy(source)
+    with torch.no_grad():
+        values = source.state_dict()
+        for key, tensor in target.state_dict().items():
+            tensor.copy_(values[key])
+    return target
+
+
+class ConcurrentBackEnd(KeyframeBackEnd):
+    """The keyframe back end with its mapping calls beside the tracker (module doc)."""
+
+    def __init__(self, context: RunContext) -> None:
+        super().__init__(context)
+        if self.loops is not None:
+            raise ValueError("concurrent mapping does not close loops")  # the config refuses it
+        self.worker = MappingWorker(context.device)
+        self.generator = torch.Generator(device=context.device)
+        self.generator.manual_seed(context.config.seed + 1)  # the worker's own draws
+        self.working: SceneField | None = None
+        self.flight: Flight | None = None
+        self.waiting: tuple[Frame, int] | None = None
+        self._frame = -1
+
+    def add(
+        self, frame: Frame, index: int, tracked: TrackedFrame, state: SLAMState, total: int | None
+    ) -> bool:
+        """Frame ``index``: a completed call is taken in, a keyframe queued, the next call
+        handed over when the worker is idle. Returns whether the frame became a keyframe
+        (queued for the mapper, not yet mapped)."""
+        self._frame = index
+        state.component(COMPONENT)  # metrics.json reports the counts, zero or not
+        self.collect(state, wait=False)
+        if not tracked.has_depth:
+            check_some_depth(index, total, len(state.keyframes), self.context.source)
+        if state.field is None:
+            self._create_field(frame, index, tracked.has_depth, state)
+        known = len(state.keyframes) + (self.waiting is not None)
+        keyframe = not tracked.failed and (
+            tracked.recovered
+            or self.schedule.is_keyframe(index, tracked.has_depth, known)
+            or self.new_space(tracked)
+        )
+        if keyframe:
+            self._queue(frame, index, state)
+        state.last_mapped = tracked.failed or not tracked.has_depth
+        self._hand_over(state)
+        own = state.component(COMPONENT)
+        own["queue"] = (self.flight is not None) + (self.waiting is not None)
+        return keyframe
+
+    def _queue(self, frame: Frame, index: int, state: SLAMState) -> None:
+        own = state.component(COMPONENT)
+        if self.waiting is not None and not self.context.real_time:
+            # recorded data: every keyframe is mapped, the tracker waits for the mapper
+            self.collect(state, wait=True)
+            self._hand_over(state)
+        if self.waiting is not None:
+            own["replaced"] = own.get("replaced", 0) + 1
+            if own["replaced"] == 1:
+                self.context.logger.warning(
+                    "mapping falls behind: keyframe %d replaced by frame %d while frame %d "
+                    "is mapped (only the newest waiting keyframe is kept)",
+                    self.waiting[1],
+                    index,
+                    -1 if self.flight is None else self.flight.job.index,
+                )
+        self.waiting = (frame, index)
+        own["queue_max"] = max(own.get("queue_max", 0), 1 + (self.flight is not None))
+
+    def _hand_over(self, state: SLAMState) -> None:
+        """Give the waiting keyframe's call to the worker if it is idle."""
+        if self.flight is not None or self.waiting is None or state.field is None:
+            return
+        frame, index = self.waiting
+        self.waiting = None
+        if self.working is None:
+            self.working = copy.deepcopy(state.field)
+        working = self.working
+        job = self.prepare(frame, index, state, working)
+        warmed = job.schedule.warm_start is not None
+        if warmed:  # the map's first keyframe: the tracker has the warm-started map at once
+            warm_start_window(
+                working, job.views, job.poses, self.mapping, job.schedule, self.generator
+            )
+            self._publish(state)
+            job = dataclasses.replace(
+                job, schedule=dataclasses.replace(job.schedule, warm_start=None)
+            )
+        mapper, generator = self.mapper, self.generator
+
+        def call() -> MappingResult:
+            return mapper.map(
+                working, job.views, job.poses, job.optimise, job.schedule, generator=generator
+            )
+
+        future = self.worker.submit(call)
+        self.flight = Flight(job, future, self._frame, time.perf_counter())
+        if index == state.next_frame - 1:
+            state.last_mapped = True
+        if job.first and not warmed:
+            self.collect(state, wait=True)  # no warm start: no map to track on before it
+
+    def _publish(self, state: SLAMState) -> None:
+        """The working field becomes the tracker's map (between frames)."""
+        assert self.working is not None
+        state.field = copy_field(self.working, state.field)
+
+    def collect(self, state: SLAMState, wait: bool) -> None:
+        """Take in the call in flight if it is done (``wait``: once it is): the tracker
+        gets its map, the trajectory its poses. A call that failed is dropped (its
+        keyframe with it) and its error raised; Ctrl-C while waiting leaves it in flight."""
+        flight = self.flight
+        if flight is None or not (wait or flight.future.done()):
+            return
+        try:
+            result = flight.future.result()
+        except BaseException:
+            if not flight.future.done():  # interrupted while waiting: the call goes on
+                raise
+            self.flight = None
+            self._drop(state, flight.job)
+            raise
+        self.flight = None
+        self._publish(state)
+        own = state.component(COMPONENT)
+        own["calls"] = own.get("calls", 0) + 1
+        own["busy_s"] = own.get("busy_s", 0.0) + time.perf_counter() - flight.started
+        self.apply(flight.job, result, state)
+
+    def _drop(self, state: SLAMState, job: MappingJob) -> None:
+        """Forget a call whose result is not taken in: its keyframe leaves the store, the
+        working field (changed by it) is copied from the tracker's map again."""
+        self.working = None
+        state.keyframes.truncate(job.keyframe)
+        if self.views is not None:
+            self.views.forget_from(job.keyframe)
+
+    def settle(self, state: SLAMState) -> None:
+        """Wait for the call in flight and map the waiting keyframe (the run stops here)."""
+        self.collect(state, wait=True)
+        if self.waiting is not None:
+            self._hand_over(state)
+            self.collect(state, wait=True)
+
+    def finish(self, state: SLAMState, last: Frame | None) -> None:
+        self.settle(state)
+        if not state.last_mapped and last is not None:
+            self.waiting = (last, state.next_frame - 1)
+            self.settle(state)
+        self._map_last(state, last)  # only a last frame no longer available is left
+        self.worker.close()
+
+    def rollback(self, state: SLAMState, mark: FrameMark) -> None:
+        """Undo the frame begun at ``mark``: the call in flight is waited for and taken in
+        when a completed frame handed it over, dropped when this frame did (its keyframe
+        waits again if it came from a completed frame)."""
+        flight = self.flight
+        if flight is not None:
+            flight.future.exception()  # wait, whatever its outcome
+            if flight.handed_at < mark.frames:
+                try:
+                    self.collect(state, wait=True)
+                except Exception:  # dropped with its keyframe; the frame's error is raised
+                    pass
+            else:
+                self.flight = None
+                self._drop(state, flight.job)
+                if flight.job.index < mark.frames:
+                    self.waiting = (flight.job.frame, flight.job.index)
+        if self.waiting is not None and self.waiting[1] >= mark.frames:
+            self.waiting = None
+        counts = dict(state.component(COMPONENT))  # calls taken in above stay counted
+        state.rollback(mark, None)
+        state.components[COMPONENT] = counts
+        if self.views is not None:
+            self.views.forget_from(mark.keyframes)
+
+
+def concurrency_metrics(state: SLAMState, wall_s: float) -> dict:
+    """metrics.json's keys of a concurrent run over ``wall_s`` seconds (none for a run
+    that maps in turn): mapping calls completed, their rate, the share of the run the
+    mapper was busy, keyframes replaced while waiting, the longest queue (in flight
+    plus waiting)."""
+    own = state.components.get(COMPONENT)
+    if own is None:
+        return {}
+    calls = int(own.get("calls", 0))
+    busy = float(own.get("busy_s", 0.0))
+    return {
+        "mapping_concurrent": True,
+        "mapping_calls": calls,
+        "mapping_calls_per_s": calls / wall_s if wall_s > 0 else 0.0,
+        "mapping_busy_share": busy / wall_s if wall_s > 0 else 0.0,
+        "mapping_keyframes_replaced": int(own.get("replaced", 0)),
+        "mapping_queue_max": int(own.get("queue_max", 0)),
+    }

@@ -1,0 +1,203 @@
+"""Mapping beside the tracker (mapping.concurrent): tracks, hands over whole maps only,
+stops and resumes, accounts for every frame of a real-time replay."""
+
+from __future__ import annotations
+
+import json
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from eslam.config import load_config
+from eslam.data import open_sequence
+from eslam.data.source import IterableSource
+from eslam.errors import ConfigError
+from eslam.field.scene_field import SceneField
+from eslam.slam.mapping.concurrent_mapping import ConcurrentBackEnd, copy_field, same_layout
+from eslam.slam.mapping.mapper import MappingResult
+from eslam.slam.run.observers import FrameDone, RunObserverBase
+from eslam.slam.session import Components, run_slam
+from eslam.slam.state import load_state
+from eslam.slam.tracking.frontend import TrackedFrame
+from eslam.workflows.demo import DEMO_CONFIG
+from tests.conftest import TINY_FRAMES, static_ate_cm, tiny_config
+
+QUICK = ("mapping.first_iterations=5", "mapping.iterations=3", "output.checkpoint_every=100")
+CONCURRENT = ("mapping.concurrent=true", "output.checkpoint_every=100")
+
+
+def keyframes_of(run: Path, config) -> int:
+    return len(load_state(run / "map.pt", config, torch.device("cpu")).keyframes)
+
+
+@pytest.mark.slow
+def test_a_concurrent_run_tracks_and_maps_every_keyframe_it_keeps(
+    tiny_sequence: Path, tmp_path: Path
+) -> None:
+    config = tiny_config(tiny_sequence, *CONCURRENT)
+    result = run_slam(config, tmp_path / "run")
+    metrics = result.metrics
+    gt = open_sequence(config.data).gt_poses()
+    assert metrics["frames"] == TINY_FRAMES
+    assert metrics["ate_rmse_cm"] < static_ate_cm(gt) / 2  # a tracker that never moves fails
+    assert metrics["mapping_concurrent"] is True
+    # every keyframe the run kept was mapped by a whole call (the last frame's included)
+    assert metrics["mapping_calls"] == keyframes_of(tmp_path / "run", config) >= 2
+    assert metrics["mapping_queue_max"] >= 1 and metrics["mapping_calls_per_s"] > 0
+    log = (tmp_path / "run" / "log.txt").read_text()
+    assert f"mapped frame {TINY_FRAMES - 1}:" in log
+
+
+class SlowMapper:
+    """A mapper that writes version -v into the field's parameters one tensor at a time,
+    sleeping in between: a tracker reading the field mid-call would see two versions (or
+    a version and the map before it)."""
+
+    def __init__(self) -> None:
+        self.version = 0
+        self.threads: set[int] = set()
+
+    def map(self, field, views, poses, optimise, schedule, generator, on_step=None):
+        self.threads.add(threading.get_ident())
+        self.version += 1
+        with torch.no_grad():
+            for parameter in field.parameters():
+                parameter.fill_(-float(self.version))
+                time.sleep(0.005)
+        return MappingResult(poses=poses.clone(), loss=torch.zeros(()))
+
+
+class VersionReader:
+    """A front end that reads the first value of each of the map's parameters, then
+    gives the ground-truth pose (the map is no map: the mapper writes constants)."""
+
+    def __init__(self) -> None:
+        self.seen: list[set[float]] = []
+
+    def track(self, frame, index, state) -> TrackedFrame:
+        if state.field is not None and len(state.keyframes) > 0:
+            self.seen.append({float(p.flatten()[0]) for p in state.field.parameters()})
+        time.sleep(0.1)  # a tracker takes time: calls complete while frames go on
+        pose = torch.as_tensor(frame.pose_gt, dtype=torch.float32)
+        return TrackedFrame(pose=pose, has_depth=True, tracked=True)
+
+
+@pytest.mark.slow
+def test_the_tracker_reads_only_whole_maps_from_a_slow_mapper(
+    tiny_sequence: Path, tmp_path: Path
+) -> None:
+    mapper, reader = SlowMapper(), VersionReader()
+
+    def back_end(context) -> ConcurrentBackEnd:
+        built = ConcurrentBackEnd(context)
+        built.mapper = mapper
+        return built
+
+    config = tiny_config(
+        tiny_sequence, *CONCURRENT, "mapping.first_warm_start=none", "output.mesh=false"
+    )
+    run_slam(config, tmp_path / "run", components=Components(lambda _: reader, back_end))
+    assert mapper.threads and threading.get_ident() not in mapper.threads  # beside the loop
+    assert len(reader.seen) == TINY_FRAMES - 1
+    versions = []
+    for seen in reader.seen:  # the map before the first call (random), or one version
+        written = {value for value in seen if value <= -1 and value.is_integer()}
+        if written:
+            assert seen == written and len(written) == 1, reader.seen  # never torn
+            versions.append(-written.pop())
+    assert versions == sorted(versions) and len(set(versions)) >= 3, reader.seen
+
+
+@pytest.mark.slow
+def test_a_stopped_concurrent_run_holds_whole_calls_and_resumes_in_turn(
+    tiny_sequence: Path, tmp_path: Path
+) -> None:
+    config = tiny_config(tiny_sequence, *CONCURRENT)
+    run = tmp_path / "run"
+    stopped = run_slam(config, run, stop_after=6)
+    # the call in flight and the waiting keyframe were mapped before map.pt was written
+    assert stopped.metrics["mapping_calls"] == keyframes_of(run, config)
+    resumed = run_slam(load_config(run / "config.yaml"), run, resume=True)
+    assert len(resumed.poses) == TINY_FRAMES
+    assert "a resumed run maps in turn" in (run / "log.txt").read_text()
+    gt = open_sequence(config.data).gt_poses()
+    assert resumed.metrics["ate_rmse_cm"] < static_ate_cm(gt) / 2
+
+
+@pytest.mark.slow
+def test_a_real_time_replay_maps_beside_and_accounts_for_every_frame(
+    tiny_sequence: Path, tmp_path: Path
+) -> None:
+    # real time maps beside the tracker unless told otherwise; a replay faster than this
+    # machine drops frames, and every frame received is processed or dropped
+    config = tiny_config(tiny_sequence, *QUICK, "data.realtime=true", "data.replay_fps=200")
+    result = run_slam(config, tmp_path / "rt")
+    metrics = result.metrics
+    assert metrics["mapping_concurrent"] is True
+    assert metrics["frames_received"] == TINY_FRAMES
+    assert metrics["frames"] + metrics["frames_dropped"] == TINY_FRAMES
+    timings = json.loads((tmp_path / "rt" / "timings.json").read_text())
+    assert len(timings["lag_s"]) == metrics["frames"] == len(timings["source_index"])
+    assert 0 <= metrics["tracking_lag_s_mean"] <= metrics["tracking_lag_s_max"]
+    assert timings["source_index"][-1] == TINY_FRAMES - 1  # the newest is processed
+
+
+class CtrlCAt(RunObserverBase):
+    """Presses Ctrl-C once frame ``index`` is done."""
+
+    def __init__(self, index: int) -> None:
+        self.index = index
+
+    def on_frame(self, frame: FrameDone) -> None:
+        if frame.index == self.index:
+            raise KeyboardInterrupt
+
+
+@pytest.mark.slow
+def test_ctrl_c_in_a_concurrent_live_run_waits_for_the_call_and_saves(
+    tiny_sequence: Path, tmp_path: Path
+) -> None:
+    config = tiny_config(tiny_sequence, *QUICK)
+    sequence = open_sequence(config.data)
+
+    def camera():  # a live camera at ~100 fps, endless
+        i = 0
+        while True:
+            yield sequence[i % len(sequence)]
+            i += 1
+            time.sleep(0.01)
+
+    source = IterableSource(sequence.intrinsics, camera(), name="camera", live=True)
+    result = run_slam(config, tmp_path / "live", source=source, observers=[CtrlCAt(4)])
+    run = tmp_path / "live"
+    for name in ("map.pt", "trajectory.txt", "mesh.ply", "metrics.json"):
+        assert (run / name).is_file(), name
+    metrics = result.metrics
+    assert metrics["frames"] == 5 and metrics["mapping_concurrent"] is True
+    assert metrics["mapping_calls"] == keyframes_of(run, config)
+    assert not any(t.name.startswith("eslam-mapping") for t in threading.enumerate())
+
+
+def test_a_finished_call_reaches_the_tracker_in_place_or_as_a_new_field() -> None:
+    config = load_config(DEMO_CONFIG).field
+    bound = torch.tensor([[-1.0, 1.0], [-1.0, 1.0], [-1.0, 1.0]])
+    tracker = SceneField(config, bound, torch.Generator().manual_seed(0))
+    mapped = SceneField(config, bound, torch.Generator().manual_seed(1))
+    assert same_layout(mapped, tracker)
+    assert copy_field(mapped, tracker) is tracker  # in place: whoever holds it sees it
+    for key, value in mapped.state_dict().items():
+        assert torch.equal(tracker.state_dict()[key], value), key
+    mapped.grow(torch.tensor([[-1.0, 2.0], [-1.0, 1.0], [-1.0, 1.0]]))
+    assert not same_layout(mapped, tracker)
+    grown = copy_field(mapped, tracker)
+    assert grown is not tracker and grown is not mapped  # the mapper keeps its own
+    np.testing.assert_array_equal(grown.bound.numpy(), mapped.bound.numpy())
+
+
+def test_concurrent_mapping_with_loop_closure_is_refused() -> None:
+    with pytest.raises(ConfigError, match=r"mapping\.concurrent=false"):
+        load_config(DEMO_CONFIG, ["mapping.concurrent=true", "mapping.loops.enabled=true"])
