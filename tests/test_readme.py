@@ -47,4 +47,4 @@ def _declared_extras() -> set[str]:
 
 def test_ci_installs_every_extra_and_runs_the_readme_test_command() -> None:
     assert _extras(_ci_line("install_cmd")) == _declared_extras() >= {"eval", "viz", "dev"}
-    assert _ci_line("test_cmd") == "pytest"
+    assert _ci_line("test_cmd") == "pytest -n 2"  # two tests side by side (pytest-xdist)

@@ -93,7 +93,9 @@ class RunLoop:
                 interrupted = True
                 break
         close_iterator(iterator)  # a reader thread stops taking frames it cannot process
-        self.back_end.settle(state)  # mapping under way (beside the tracker) completes
+        settle = getattr(self.back_end, "settle", None)  # a back end without it maps in turn
+        if settle is not None:
+            settle(state)  # mapping under way (beside the tracker) completes
         if complete:
             mark = self._mark()
             try:

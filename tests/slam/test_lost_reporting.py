@@ -90,7 +90,7 @@ def test_a_loss_is_reported_in_metrics_and_log(
 
 def test_the_progress_bar_shows_the_camera_lost_while_it_is() -> None:
     rows: list[list[float]] = []
-    state = SimpleNamespace(tracking_quality=rows, next_frame=0)
+    state = SimpleNamespace(tracking_quality=rows, next_frame=0, components={})
     bar = ProgressObserver(True, file=io.StringIO())
     start = RunStart(None, Path("."), state, torch.device("cpu"), "test", 6, False)
     bar.on_start(start)

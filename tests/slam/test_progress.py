@@ -31,7 +31,10 @@ class Clock:
 
 def _start(frames: int) -> RunStart:
     state = SimpleNamespace(
-        next_frame=0, trajectory=SimpleNamespace(gt_poses=lambda: None), tracking_quality=[]
+        next_frame=0,
+        trajectory=SimpleNamespace(gt_poses=lambda: None),
+        tracking_quality=[],
+        components={},
     )
     return RunStart(None, Path("run"), state, torch.device("cpu"), "seq", frames, False)
 

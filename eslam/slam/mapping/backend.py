@@ -105,7 +105,8 @@ class BackEnd(Protocol):
 
     def settle(self, state: SLAMState) -> None:
         """The run stops (the stream ended, or it was stopped): finish the mapping work
-        under way, so that a checkpoint holds whole mapping calls."""
+        under way, so that a checkpoint holds whole mapping calls. Optional: the loop
+        skips a back end without it (one that maps in turn, written before it existed)."""
         ...
 
     def rollback(self, state: SLAMState, mark: FrameMark) -> None:
