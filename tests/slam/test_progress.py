@@ -75,6 +75,19 @@ def test_the_first_mapping_call_has_its_own_bar() -> None:
     assert "mapping frame 0 (the map's first call)" in out.getvalue()
 
 
+def test_the_bar_shows_the_mapping_queue_of_a_run_that_maps_beside() -> None:
+    out = io.StringIO()
+    progress = ProgressObserver(True, out)
+    start = _start(10)
+    progress.on_start(start)
+    progress.on_frame(_frame(0))
+    assert "map_queue" not in progress.postfix  # mapping in turn: no queue
+    start.state.components["concurrent_mapping"] = {"queue": 2}
+    progress.on_frame(_frame(1))
+    assert progress.postfix["map_queue"] == "2"
+    progress.close()
+
+
 class Recorder(RunObserverBase):
     def __init__(self) -> None:
         self.steps: list[MappingStep] = []

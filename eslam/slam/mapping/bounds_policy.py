@@ -104,7 +104,8 @@ def bound_from_frame(
         ConfigError: the estimated bound is wider than ``scene.max_extent``.
     """
     pose = pose.detach().cpu().double()
-    points = depth_points(torch.from_numpy(frame.depth).double(), frame.intrinsics, pose)
+    depth = torch.tensor(frame.depth, dtype=torch.float64)  # a copy: frames may be read-only
+    points = depth_points(depth, frame.intrinsics, pose)
     if len(points) == 0:
         raise ValueError("the frame has no valid depth")
     bound = estimate_bound(points, scene.auto_bound_margin, centres=pose[:3, 3]).float()
