@@ -16,10 +16,13 @@ import torch
 
 from eslam.testing.tiny import TINY_SETTINGS
 
-# Two threads per test, or one per worker when pytest-xdist runs tests side by side
-# (`pytest -n 2`, README): small tensors gain little from a second thread.
-_DEFAULT_THREADS = "1" if os.environ.get("PYTEST_XDIST_WORKER") else "2"
-torch.set_num_threads(int(os.environ.get("ESLAM_TEST_THREADS", _DEFAULT_THREADS)))
+# Two threads per test, also when pytest-xdist runs two side by side (`pytest -n 2`,
+# README): the tests that resume a run and compare it with an uninterrupted one to 1e-7
+# were written at two threads, and at one thread (ESLAM_TEST_THREADS=1) two of them
+# differ by up to 6e-5 m, depending on what ran before in the process (not explained
+# yet; tests/slam/test_run_seams.py: the corrupt depth image, the interruption during
+# mapping).
+torch.set_num_threads(int(os.environ.get("ESLAM_TEST_THREADS", "2")))
 
 # Without CUDA, plane_sampling: triton's tests run its kernels on CPU tensors in Triton's
 # interpreter. Triton reads TRITON_INTERPRET as it decorates kernels, its own library

@@ -121,6 +121,7 @@ def test_a_stopped_concurrent_run_holds_whole_calls_and_resumes_in_turn(
     stopped = run_slam(config, run, stop_after=6)
     # the call in flight and the waiting keyframe were mapped before map.pt was written
     assert stopped.metrics["mapping_calls"] == keyframes_of(run, config)
+    assert not any(t.name.startswith("eslam-mapping") for t in threading.enumerate())
     resumed = run_slam(load_config(run / "config.yaml"), run, resume=True)
     assert len(resumed.poses) == TINY_FRAMES
     assert "a resumed run maps in turn" in (run / "log.txt").read_text()

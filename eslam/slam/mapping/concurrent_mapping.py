@@ -70,7 +70,7 @@ class MappingWorker:
     """
 
     def __init__(self, device: torch.device) -> None:
-        self.executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="eslam-mapping")
+        self.executor: ThreadPoolExecutor | None = None  # started with the first call
         self.stream = torch.cuda.Stream(device) if device.type == "cuda" else None
 
     def submit(self, call: Callable[[], MappingResult]) -> Future[MappingResult]:
@@ -80,6 +80,8 @@ class MappingWorker:
         if self.stream is not None:
             ready = torch.cuda.Event()
             ready.record()  # the views and poses the run loop's stream built for the call
+        if self.executor is None:
+            self.executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="eslam-mapping")
         return self.executor.submit(self._run, call, ready)
 
     def _run(self, call: Callable[[], MappingResult], ready: torch.cuda.Event | None):
@@ -92,8 +94,10 @@ class MappingWorker:
         return result
 
     def close(self) -> None:
-        """Let the thread end (a call in flight finishes first)."""
-        self.executor.shutdown(wait=True)
+        """Let the thread end (a call in flight finishes first); again is fine."""
+        if self.executor is not None:
+            self.executor.shutdown(wait=True)
+            self.executor = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -269,11 +273,13 @@ class ConcurrentBackEnd(KeyframeBackEnd):
             self.views.forget_from(job.keyframe)
 
     def settle(self, state: SLAMState) -> None:
-        """Wait for the call in flight and map the waiting keyframe (the run stops here)."""
+        """Wait for the call in flight and map the waiting keyframe (the run stops here);
+        the worker's thread ends (a later call starts another)."""
         self.collect(state, wait=True)
         if self.waiting is not None:
             self._hand_over(state)
             self.collect(state, wait=True)
+        self.worker.close()
 
     def finish(self, state: SLAMState, last: Frame | None) -> None:
         self.settle(state)
@@ -281,32 +287,35 @@ class ConcurrentBackEnd(KeyframeBackEnd):
             self.waiting = (last, state.next_frame - 1)
             self.settle(state)
         self._map_last(state, last)  # only a last frame no longer available is left
-        self.worker.close()
 
     def rollback(self, state: SLAMState, mark: FrameMark) -> None:
         """Undo the frame begun at ``mark``: the call in flight is waited for and taken in
         when a completed frame handed it over, dropped when this frame did (its keyframe
         waits again if it came from a completed frame)."""
         flight = self.flight
-        if flight is not None:
-            flight.future.exception()  # wait, whatever its outcome
-            if flight.handed_at < mark.frames:
-                try:
-                    self.collect(state, wait=True)
-                except Exception:  # dropped with its keyframe; the frame's error is raised
-                    pass
-            else:
-                self.flight = None
-                self._drop(state, flight.job)
-                if flight.job.index < mark.frames:
-                    self.waiting = (flight.job.frame, flight.job.index)
-        if self.waiting is not None and self.waiting[1] >= mark.frames:
-            self.waiting = None
-        counts = dict(state.component(COMPONENT))  # calls taken in above stay counted
-        state.rollback(mark, None)
-        state.components[COMPONENT] = counts
-        if self.views is not None:
-            self.views.forget_from(mark.keyframes)
+        try:
+            if flight is not None:
+                flight.future.exception()  # wait, whatever its outcome
+                if flight.handed_at < mark.frames:
+                    try:
+                        self.collect(state, wait=True)
+                    except Exception:  # dropped with its keyframe; the frame's error is raised
+                        pass
+                else:
+                    self.flight = None
+                    self._drop(state, flight.job)
+                    if flight.job.index < mark.frames:
+                        self.waiting = (flight.job.frame, flight.job.index)
+        finally:  # the frame is undone even when a second Ctrl-C cuts the wait short
+            if self.waiting is not None and self.waiting[1] >= mark.frames:
+                self.waiting = None
+            counts = dict(state.component(COMPONENT))  # calls taken in above stay counted
+            state.rollback(mark, None)
+            state.components[COMPONENT] = counts
+            if self.views is not None:
+                self.views.forget_from(mark.keyframes)
+            if self.flight is None:
+                self.worker.close()
 
 
 def concurrency_metrics(state: SLAMState, wall_s: float) -> dict:
