@@ -574,8 +574,9 @@ class MappingConfig:
     concurrent: bool | None = None
     """Map beside the tracker (eslam/slam/mapping/concurrent.py, docs/live.md): mapping calls
     run in a thread while frames are tracked on the last whole map, a newer keyframe
-    replacing one still waiting. null = on in real time (``--realtime``, a live camera),
-    off for recorded data (in turn: deterministic); a resumed run maps in turn."""
+    replacing one still waiting. null = on in real time (``--realtime``, a live camera)
+    unless loop closure is on, off for recorded data (in turn: deterministic); a resumed
+    run maps in turn."""
     keyframe_coverage: float = 0.0
     """Also make a tracked frame a keyframe when less than this share of its pixels lay
     in observed space (needs ``tracking.observed_only``, which measures the share): the

@@ -179,8 +179,12 @@ def concurrent_mapping(
     config: ESLAMConfig, real_time: bool, resume: bool, logger: logging.Logger
 ) -> bool:
     """Whether the run maps beside the tracker: ``mapping.concurrent``, or when it is not
-    set, whether the run is in real time; a resumed run maps in turn (and says so)."""
+    set, whether the run is in real time (unless it closes loops, which needs mapping in
+    turn); a resumed run maps in turn. Either exception is said in log.txt."""
     wanted = config.mapping.concurrent
+    if wanted is None and real_time and config.mapping.loops.enabled:
+        logger.info("loop closure is on: this real-time run maps in turn (mapping.concurrent)")
+        return False
     concurrent = real_time if wanted is None else wanted
     if concurrent and resume:
         logger.info("a resumed run maps in turn (mapping.concurrent applies to new runs)")

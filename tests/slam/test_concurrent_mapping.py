@@ -4,6 +4,7 @@ stops and resumes, accounts for every frame of a real-time replay."""
 from __future__ import annotations
 
 import json
+import logging
 import threading
 import time
 from pathlib import Path
@@ -20,7 +21,7 @@ from eslam.field.scene_field import SceneField
 from eslam.slam.mapping.concurrent_mapping import ConcurrentBackEnd, copy_field, same_layout
 from eslam.slam.mapping.mapper import MappingResult
 from eslam.slam.run.observers import FrameDone, RunObserverBase
-from eslam.slam.session import Components, run_slam
+from eslam.slam.session import Components, concurrent_mapping, run_slam
 from eslam.slam.state import load_state
 from eslam.slam.tracking.frontend import TrackedFrame
 from eslam.workflows.demo import DEMO_CONFIG
@@ -199,6 +200,13 @@ def test_a_finished_call_reaches_the_tracker_in_place_or_as_a_new_field() -> Non
     np.testing.assert_array_equal(grown.bound.numpy(), mapped.bound.numpy())
 
 
-def test_concurrent_mapping_with_loop_closure_is_refused() -> None:
+def test_concurrent_mapping_with_loop_closure_is_refused_or_not_chosen() -> None:
     with pytest.raises(ConfigError, match=r"mapping\.concurrent=false"):
         load_config(DEMO_CONFIG, ["mapping.concurrent=true", "mapping.loops.enabled=true"])
+    log = logging.getLogger("test-concurrent")
+    looping = load_config(DEMO_CONFIG, ["mapping.loops.enabled=true"])
+    assert not concurrent_mapping(looping, real_time=True, resume=False, logger=log)
+    plain = load_config(DEMO_CONFIG)
+    assert concurrent_mapping(plain, real_time=True, resume=False, logger=log)
+    assert not concurrent_mapping(plain, real_time=True, resume=True, logger=log)
+    assert not concurrent_mapping(plain, real_time=False, resume=False, logger=log)
