@@ -17,11 +17,11 @@ import torch
 from eslam.testing.tiny import TINY_SETTINGS
 
 # Two threads per test, also when pytest-xdist runs two side by side (`pytest -n 2`,
-# README): the tests that resume a run and compare it with an uninterrupted one to 1e-7
-# were written at two threads, and at one thread (ESLAM_TEST_THREADS=1) two of them
-# differ by up to 6e-5 m, depending on what ran before in the process (not explained
-# yet; tests/slam/test_run_seams.py: the corrupt depth image, the interruption during
-# mapping).
+# README): `eslam run` (the CLI, which tests call in-process) sets torch's threads to
+# the config's `threads` (2) for the rest of the process, and a test comparing a run
+# with another to 1e-7 needs both at the same count (float sums split by thread). At
+# ESLAM_TEST_THREADS=1 the runs after a CLI test differ from those before by up to
+# 6e-5 m (tests/slam/test_run_seams.py: the corrupt depth image, the interruption).
 torch.set_num_threads(int(os.environ.get("ESLAM_TEST_THREADS", "2")))
 
 # Without CUDA, plane_sampling: triton's tests run its kernels on CPU tensors in Triton's
