@@ -149,7 +149,8 @@ class KeyframeStore:
             raise ValueError(f"frame {index} has no finite pose in the trajectory")
         k = self._count
         self._reserve(k + 1)
-        self._rgb[k] = torch.from_numpy(np.ascontiguousarray(frame.rgb)).to(self.device)
+        rgb = np.array(frame.rgb, order="C")  # a writable copy: a reader's may be read-only
+        self._rgb[k] = torch.from_numpy(rgb).to(self.device)
         self._depth[k] = self._encode_depth(frame.depth).to(self.device)
         self._frame_indices.append(int(index))
         self._count = k + 1
