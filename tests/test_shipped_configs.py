@@ -84,6 +84,7 @@ PAPER = [p for p in PAPER if not p.stem.endswith("_cpu")]
 def test_paper_configs_keep_the_papers_tracker_and_first_frame(path: Path) -> None:
     config = load_config(path)
     assert config.tracking.method == "render"
+    assert config.tracking.start == "motion"
     assert (config.mapping.first_iterations, config.mapping.first_lr_factor) == (1000, 5.0)
     assert config.mapping.first_warm_start == "none"
 
@@ -117,3 +118,10 @@ def test_presets_hold_and_texture_degenerate_views(name: str) -> None:
     sdf = load_config(CONFIGS / name).tracking.sdf
     assert sdf.degeneracy == 0.01
     assert sdf.colour_weight == 0.2 and sdf.colour_when == "degenerate"
+
+
+@pytest.mark.parametrize("name", ["folder.yaml", "tum/tum_cpu.yaml"])
+def test_sensor_presets_start_from_features(name: str) -> None:
+    """docs/results.md "Starting pose from features": level where frames come densely,
+    every frame held at every 8th frame of TUM fr1/xyz."""
+    assert load_config(CONFIGS / name).tracking.start == "features"

@@ -441,6 +441,14 @@ class TrackingConfig:
     constant_velocity: bool = True
     """Motion model: start from the constant-velocity prediction on SE(3); off starts from
     the last pose."""
+    start: Literal["motion", "features"] = "motion"
+    """Where the tracker starts each frame: motion = the motion model's guess;
+    features = the pose from the frame's ORB features matched to the previous tracked
+    frame's (else the latest keyframe's), a rigid fit of the matched depth points (the
+    guess when fewer than ``start_min_matches`` agree): frames far apart (a stride, real
+    time) and jerks stay within the tracker's reach (docs/tracking.md, "Starting pose")."""
+    start_min_matches: int = 20
+    """Feature matches that must agree on the starting pose (RANSAC inliers within 3 cm)."""
     observed_only: bool = False
     """Track on observed space only: a pixel whose depth point, at the motion model's
     guess, no keyframe observed (outside every keyframe's view, or further than the
@@ -458,6 +466,7 @@ class TrackingConfig:
     def __post_init__(self) -> None:
         if self.border < 0:
             raise ValueError(f"border must be >= 0, got {self.border}")
+        _at_least(self, "start_min_matches", 6)
 
 
 MOVED_KEYS = {

@@ -48,9 +48,16 @@ def upload_frame(
     rgb: np.ndarray, depth: np.ndarray, device: torch.device | str
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """A frame's images on the compute device: (H, W, 3) uint8 -> float32 colour in [0, 1]
-    (converted on the device, so only bytes travel) and (H, W) float32 depth in metres."""
-    colour = torch.from_numpy(rgb).to(device).float() / 255.0
-    return colour, torch.from_numpy(depth).to(device)
+    (converted on the device, so only bytes travel) and (H, W) float32 depth in metres.
+    A read-only array (a reader's cache, a resized view) is copied first: torch shares
+    memory with the array and does not take read-only ones without a warning."""
+    colour = torch.from_numpy(writable(rgb)).to(device).float() / 255.0
+    return colour, torch.from_numpy(writable(depth)).to(device)
+
+
+def writable(array: np.ndarray) -> np.ndarray:
+    """``array``, or a copy of it when it is read-only."""
+    return array if array.flags.writeable else array.copy()
 
 
 def make_view(

@@ -94,3 +94,10 @@ def return_after_blind(
     source frames ``back_to`` (a return to places the first frames saw)."""
     order = (*range(mapped + blind), *back_to)
     return order, frozenset(range(mapped, mapped + blind))
+
+
+def reversal(forward: int) -> tuple[int, ...]:
+    """The order of a reversing camera: frames 0 to ``forward`` - 1, then back two at a
+    time to frame 1 or 0 (at the first frame back the truth is two steps behind where a
+    constant-velocity guess puts it one ahead)."""
+    return (*range(forward), *range(forward - 3, -1, -2))

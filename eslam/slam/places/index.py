@@ -19,6 +19,7 @@ import torch
 from eslam.slam.mapping.keyframes import KeyframeStore
 from eslam.slam.places.features import (
     Features,
+    RigidResult,
     mutual_matches,
     orb_features,
     rigid_pose,
@@ -94,19 +95,44 @@ class PlaceIndex:
     def locate(self, query: Place, k: int, min_inliers: int, seed: int = 0) -> PlaceMatch | None:
         """Where the query's camera is if it sees keyframe ``k``'s place: its features
         matched to the keyframe's, both with depth (the keyframe's placed with its pose
-        now), give the pose by a rigid fit in RANSAC; None without ``min_inliers``
-        agreeing matches."""
+        now), give the pose by a rigid fit in RANSAC (:func:`pose_from_matches`); None
+        without ``min_inliers`` agreeing matches."""
         place = self.places()[k]
-        pairs = mutual_matches(query.features.descriptors, place.features.descriptors)
-        if len(pairs) == 0:
-            return None
-        camera = query.features.points[pairs[:, 0]]
-        points = place.features.points[pairs[:, 1]]
-        usable = np.isfinite(points).all(axis=1) & np.isfinite(camera).all(axis=1)
-        pose = self.store.trajectory.poses[self.store.frame_indices[k]].detach().cpu().double()
-        pose = pose.numpy()
-        world = points[usable] @ pose[:3, :3].T + pose[:3, 3]
-        found = rigid_pose(camera[usable].astype(np.float64), world, min_inliers, seed)
+        pose = self.store.trajectory.poses[self.store.frame_indices[k]]
+        found = pose_from_matches(query.features, place.features, pose, min_inliers, seed)
         if found is None:
             return None
         return PlaceMatch(k, found.pose, found.inliers)
+
+
+def pose_from_matches(
+    query: Features, reference: Features, pose: torch.Tensor, min_inliers: int, seed: int
+) -> RigidResult | None:
+    """The query camera's pose from its features matched to those of a reference image
+    whose camera-to-world pose is ``pose`` (4, 4), both with depth: the reference's
+    matched points placed in the world, a rigid fit in RANSAC (:func:`rigid_pose`,
+    samples drawn with ``seed``); None without ``min_inliers`` agreeing matches."""
+    pairs = mutual_matches(query.descriptors, reference.descriptors)
+    if len(pairs) == 0:
+        return None
+    camera = query.points[pairs[:, 0]]
+    points = reference.points[pairs[:, 1]]
+    usable = np.isfinite(points).all(axis=1) & np.isfinite(camera).all(axis=1)
+    placed = pose.detach().cpu().double().numpy()
+    world = points[usable] @ placed[:3, :3].T + placed[:3, 3]
+    return rigid_pose(camera[usable].astype(np.float64), world, min_inliers, seed)
+
+
+class Places:
+    """The run's :class:`PlaceIndex`, shared by whoever asks about places (the tracking
+    front end's feature start and its recovery): made again when the run's keyframe
+    store is another object (a resumed run, a test that swaps the state)."""
+
+    def __init__(self) -> None:
+        self._index: PlaceIndex | None = None
+
+    def of(self, store: KeyframeStore) -> PlaceIndex:
+        """The index of ``store``'s keyframes."""
+        if self._index is None or self._index.store is not store:
+            self._index = PlaceIndex(store)
+        return self._index

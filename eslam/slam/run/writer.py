@@ -49,6 +49,7 @@ from eslam.slam.state import (
     save_state,
 )
 from eslam.slam.tracking.base import RECOVERIES
+from eslam.slam.tracking.feature_start import start_metrics
 
 
 @dataclass(frozen=True)
@@ -141,6 +142,7 @@ def run_metrics(state: SLAMState, device: str, peak_memory_mb: float) -> dict:
         metrics["tracking_iterations_mean"] = float(quality["tracking_iterations"][judged].mean())
         metrics.update(recovery_metrics(state.tracking_quality))
     metrics.update(loop_metrics(state))
+    metrics.update(start_metrics(state))
     if np.isfinite(quality["tracking_degenerate_directions"]).any():  # the test ran
         metrics["tracking_degenerate_frames"] = sum(map(degenerate_row, state.tracking_quality))
     gt = state.trajectory.gt_poses()

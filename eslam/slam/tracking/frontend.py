@@ -1,7 +1,9 @@
 """The tracking front end: one frame in, its pose and the tracker's judgement out.
 
 :class:`TrackingFrontEnd` prepares the frame's :class:`~eslam.slam.views.View`, takes
-the motion model's guess (:func:`~eslam.slam.tracking.trackers.predict_pose`), applies its view
+the motion model's guess (:func:`~eslam.slam.tracking.trackers.predict_pose`; with
+``tracking.start: features`` the pose image features give,
+:mod:`eslam.slam.tracking.feature_start`), applies its view
 filters (:mod:`eslam.slam.tracking.view_filters`), runs the tracker (``tracking.method``, from
 :data:`~eslam.slam.tracking.trackers.TRACKERS`) and judges the result: a failed frame (the
 tracker said so, or its pose is not finite; after a failed or untracked frame, also one
@@ -10,10 +12,12 @@ short of the recovery's inlier share) goes to the recovery
 and keeps the guess when nothing passes. The run loop appends the answer, a
 :class:`TrackedFrame`, to the trajectory; observers report it.
 
-The front end keeps no state of its own between frames: whether the last two frames
-failed or the last was recovered (then the motion model holds still) is read from the
-run's quality rows, which are checkpointed, so a run resumed right after a failed
-frame predicts its next frame exactly as the uninterrupted run does.
+The front end keeps no state of its own between frames outside the run's state:
+whether the last two frames failed or the last was recovered (then the motion model
+holds still) is read from the run's quality rows, and the feature start's reference
+features are its entry in ``state.components``; both are checkpointed, so a run
+resumed right after any frame starts its next frame exactly as the uninterrupted run
+does.
 """
 
 from __future__ import annotations
@@ -27,8 +31,10 @@ import torch
 
 from eslam.slam.context import RunContext
 from eslam.slam.mapping.bounds_policy import first_pose
+from eslam.slam.places.index import Places
 from eslam.slam.state import SLAMState, failed_row, recovery_of
 from eslam.slam.tracking.base import Tracker, TrackingQuality, judged
+from eslam.slam.tracking.feature_start import FeatureStart
 from eslam.slam.tracking.recovery import Recovery
 from eslam.slam.tracking.trackers import make_tracker, motion_guess
 from eslam.slam.tracking.view_filters import ViewFilter, make_filters
@@ -75,7 +81,9 @@ class FrontEnd(Protocol):
     """Estimates each frame's pose against the map in ``state`` (module doc)."""
 
     def track(self, frame: Frame, index: int, state: SLAMState) -> TrackedFrame:
-        """Frame ``index`` (the next one of ``state``) tracked; ``state`` is not changed."""
+        """Frame ``index`` (the next one of ``state``) tracked; ``state`` is not
+        changed, except the front end's own entries in ``state.components`` (rolled back
+        with the frame when it fails half way)."""
         ...
 
 
@@ -100,9 +108,16 @@ class TrackingFrontEnd:
         self.context = context
         self.tracker = make_tracker(context.config) if tracker is None else tracker
         self.filters = make_filters(context) if filters is None else list(filters)
-        if recovery is None and context.config.tracking.recovery.enabled:
-            recovery = Recovery(context, self.tracker)
+        settings = context.config.tracking
+        places = Places()
+        if recovery is None and settings.recovery.enabled:
+            recovery = Recovery(context, self.tracker, places)
         self.recovery = recovery
+        self.feature_start = (
+            FeatureStart(places, settings.start_min_matches)
+            if settings.start == "features"
+            else None
+        )
 
     @property
     def log(self) -> logging.Logger:
@@ -116,6 +131,12 @@ class TrackingFrontEnd:
         guess = self.guess(state)
         if not has_depth or state.field is None or len(state.keyframes) == 0:
             return TrackedFrame(guess, has_depth)
+        query = None
+        if self.feature_start is not None:
+            query = self.feature_start.describe(frame, state)
+            found = self.feature_start.start(query, state)
+            if found is not None:
+                guess = found.pose.to(guess)
         whole = view = self.view(frame)
         kept: dict[str, float] = {}
         for view_filter in self.filters:
@@ -137,6 +158,9 @@ class TrackingFrontEnd:
                 found = recovery.recover(frame, whole, guess, state)
                 if found is not None:
                     pose, quality = found.pose, found.quality
+        if self.feature_start is not None and query is not None:
+            if quality is None or not quality.failed:
+                self.feature_start.remember(query, state)
         return TrackedFrame(pose, has_depth, True, quality, kept=kept)
 
     def guess(self, state: SLAMState) -> torch.Tensor:

@@ -40,7 +40,7 @@ import torch
 from eslam.config import RecoveryConfig
 from eslam.geometry.pose import pose_distance
 from eslam.slam.context import RunContext
-from eslam.slam.places.index import PlaceIndex, PlaceMatch, describe
+from eslam.slam.places.index import PlaceMatch, Places, describe
 from eslam.slam.state import SLAMState, failed_row, failed_stretch, untracked_row
 from eslam.slam.tracking.base import Recovery as How
 from eslam.slam.tracking.base import Tracker, TrackingQuality, judged
@@ -70,13 +70,14 @@ class Recovery:
     Args:
         context: the run (``tracking.recovery`` from its config).
         tracker: the front end's tracker.
+        places: the run's place index (shared with the front end's feature start).
     """
 
-    def __init__(self, context: RunContext, tracker: Tracker) -> None:
+    def __init__(self, context: RunContext, tracker: Tracker, places: Places | None = None) -> None:
         self.context = context
         self.settings: RecoveryConfig = context.config.tracking.recovery
         self.tracker = tracker
-        self._places: PlaceIndex | None = None
+        self.places = Places() if places is None else places
 
     def recover(
         self, frame: Frame, view: View, guess: torch.Tensor, state: SLAMState
@@ -147,9 +148,7 @@ class Recovery:
         """Step 2 of the module doc: the most alike keyframes, verified by tracking
         (each refused candidate is logged)."""
         store = state.keyframes
-        if self._places is None or self._places.store is not store:
-            self._places = PlaceIndex(store)
-        places = self._places
+        places = self.places.of(store)
         query = describe(frame.rgb, frame.depth, store)
         best = None
         for k, similarity in places.alike(query, self.settings.candidates):

@@ -1,0 +1,138 @@
+"""A frame's starting pose from image features (``tracking.start: features``).
+
+The SDF tracker converges from a start within about the truncation of the truth (a few
+centimetres, a few degrees at room depth); the motion model's constant-velocity guess
+is that close only while the camera moves smoothly and the frames come densely. Between
+frames far apart in time (a stride, a real-time run that processes a fraction of the
+frames) or through a jerk, the guess is often 5-12 cm and 3-13 degrees off
+(docs/tracking.md, "Starting pose"), and the tracker settles on a wrong pose or fails.
+
+With ``start: features`` each frame's ORB features are matched to a reference image
+whose pose the run has: the previous frame when it was tracked (not failed), else the
+latest keyframe (:class:`~eslam.slam.places.index.PlaceIndex`, shared with the
+recovery's relocalisation; also when the previous frame gives no pose). A rigid motion
+fitted in RANSAC to the matched features' depth points
+(:func:`~eslam.slam.places.index.pose_from_matches`; the reference's points placed
+with its pose now) gives the starting pose: frame-to-frame visual odometry as a coarse
+alignment, the SDF tracker then refining it against the map. A frame with fewer than
+``start_min_matches`` agreeing matches starts from the motion model's guess, as before.
+
+The previous frame's features are this component's state (``state.components``,
+:data:`COMPONENT`): checkpointed and rolled back with the frame, so a resumed run
+starts each frame as the uninterrupted one does (the fit's samples are drawn with the
+frame index as seed).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from eslam.slam.places.features import Features
+from eslam.slam.places.index import Place, Places, describe, pose_from_matches
+from eslam.slam.state import SLAMState
+from eslam.types import Frame
+
+COMPONENT = "feature_start"
+"""The key of this component's state in ``state.components``: the last tracked
+frame's index and its features (``frame`` and :data:`FEATURES`) and how many
+frames started from where (``starts``: :data:`STARTS` -> count; metrics.json's
+``tracking_starts``)."""
+
+FEATURES = ("pixels", "descriptors", "points")
+"""The fields of :class:`~eslam.slam.places.features.Features` kept, in its order."""
+
+STARTS = ("previous_frame", "keyframe", "motion_model")
+"""Where a frame's start came from: features matched to the previous frame's, to the
+latest keyframe's, or (too few agreed) the motion model's guess."""
+
+
+@dataclass(frozen=True, eq=False)
+class FeatureStartResult:
+    """A starting pose from features.
+
+    Attributes:
+        pose: (4, 4) float64 camera-to-world, on the CPU.
+        reference: the frame index of the image it was matched to.
+        inliers: the matches that agree on it.
+    """
+
+    pose: torch.Tensor
+    reference: int
+    inliers: int
+
+
+class FeatureStart:
+    """The starting pose of the module doc.
+
+    Args:
+        places: the run's place index.
+        min_matches: matches that must agree on the pose (RANSAC inliers within 3 cm).
+    """
+
+    def __init__(self, places: Places, min_matches: int) -> None:
+        self.places = places
+        self.min_matches = min_matches
+
+    def describe(self, frame: Frame, state: SLAMState) -> Place:
+        """``frame`` as a place (global descriptor and ORB features with depth)."""
+        return describe(frame.rgb, frame.depth, state.keyframes)
+
+    def start(self, query: Place, state: SLAMState) -> FeatureStartResult | None:
+        """The next frame's pose from its features ``query`` matched to the previous
+        frame's (when it was tracked), else to the latest keyframe's; None when neither
+        gives ``min_matches`` agreeing matches. Counts where the start came from."""
+        found = self.matched(query, state)
+        if found is None:
+            how = "motion_model"
+        elif found.reference == state.next_frame - 1:
+            how = "previous_frame"
+        else:
+            how = "keyframe"
+        starts = state.component(COMPONENT).setdefault("starts", dict.fromkeys(STARTS, 0))
+        starts[how] += 1
+        return found
+
+    def matched(self, query: Place, state: SLAMState) -> FeatureStartResult | None:
+        """:meth:`start`'s pose, not counted."""
+        index = state.next_frame
+        previous = state.components.get(COMPONENT, {})
+        tried = previous.get("frame") == index - 1
+        if tried:
+            reference = Features(*(previous[key].numpy() for key in FEATURES))
+            pose = state.trajectory.poses[index - 1]
+            found = pose_from_matches(query.features, reference, pose, self.min_matches, index)
+            if found is not None:
+                return FeatureStartResult(torch.from_numpy(found.pose), index - 1, found.inliers)
+        store = state.keyframes
+        if len(store) == 0:
+            return None
+        frames = store.frame_indices
+        latest = max(range(len(frames)), key=frames.__getitem__)
+        if tried and frames[latest] == index - 1:
+            return None  # the latest keyframe is the previous frame, matched above
+        match = self.places.of(store).locate(query, latest, self.min_matches, seed=index)
+        if match is None:
+            return None
+        return FeatureStartResult(torch.from_numpy(match.pose), frames[latest], match.inliers)
+
+    def remember(self, query: Place, state: SLAMState) -> None:
+        """Keep ``query``, the features of the frame just tracked (not failed), as the
+        next frame's reference (in ``state.components``)."""
+        features = query.features
+        state.component(COMPONENT).update(
+            frame=state.next_frame,
+            **{
+                key: torch.from_numpy(np.ascontiguousarray(getattr(features, key)))
+                for key in FEATURES
+            },
+        )
+
+
+def start_metrics(state: SLAMState) -> dict:
+    """metrics.json's ``tracking_starts`` (frames by where their start came from,
+    :data:`STARTS`) when the run starts frames from features, else nothing."""
+    starts = state.components.get(COMPONENT, {}).get("starts")
+    return {} if starts is None else {"tracking_starts": dict(starts)}
