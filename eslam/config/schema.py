@@ -90,6 +90,10 @@ class DataConfig:
     Tab. 1; eslam.data.depth_resolution). 1 = the depth as read."""
     camera: str | None = None
     """TUM only: fr1, fr2 or fr3 (intrinsics and distortion); null = from the folder name."""
+    pairing: Literal["release", "associate"] = "release"
+    """TUM only: how colour and depth images make frames. release = the ESLAM release's
+    rule (nearest depth within 0.08 s, a frame within 1/32 s of the last one dropped: 759
+    of fr1/xyz's 798); associate = TUM's associate.py (unique pairs within 0.02 s: 792)."""
     register_colour: bool = True
     """7-Scenes only: resample the colour image into the depth camera (its own focal length
     and a 2.5 cm baseline; eslam.data.registration) so texture lies on the geometry;

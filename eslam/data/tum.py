@@ -12,6 +12,9 @@ src/utils/datasets.py, inherited from NICE-SLAM): each colour image takes the de
 image and the ground-truth pose nearest to it in time; a colour image with no depth (or,
 when groundtruth.txt exists, no pose) closer than MAX_TIME_DIFFERENCE is dropped; then
 a frame closer than 1 / RELEASE_FRAME_RATE seconds to the last kept one is dropped.
+With ``data.pairing: associate`` colour and depth are paired as TUM's own
+``associate.py`` does (:mod:`eslam.data.tum_pairs`: every frame it pairs, e.g. 792 of
+fr1/xyz's 798 where the release's rule keeps 759), each with its nearest pose.
 
 Images: fr1 and fr2 colour AND depth are undistorted at 640x480 with the camera's
 plumb-bob coefficients (the release undistorts colour only), then resized to 512x384
@@ -40,6 +43,7 @@ import numpy as np
 from eslam.config import DataConfig
 from eslam.data.base import FileSequence, FrameReading, require_dir, require_file
 from eslam.data.transform import transform_from_options
+from eslam.data.tum_pairs import unique_pairs
 from eslam.data.undistort import PlumbBob, Undistorter
 from eslam.errors import ConfigError, InputError
 from eslam.io.pose_files import TUM_COLUMNS, read_pose_table, text_lines, tum_poses
@@ -228,12 +232,16 @@ def associate(
     pose_times: np.ndarray | None,
     max_dt: float = MAX_TIME_DIFFERENCE,
     frame_rate: float = RELEASE_FRAME_RATE,
+    pairing: str = "release",
 ) -> Association:
     """Pair every colour image with the nearest depth image and pose, as the release.
 
     A colour image is kept when its nearest depth (and pose, if given) is strictly
     closer than ``max_dt`` seconds, and when it comes more than 1 / ``frame_rate``
-    seconds after the previous kept one (release ``loadtum``).
+    seconds after the previous kept one (release ``loadtum``). With ``pairing``
+    "associate" the colour-depth pairs are TUM's ``associate.py``'s
+    (:func:`~eslam.data.tum_pairs.unique_pairs`) and each keeps the nearest pose closer
+    than ``max_dt`` (no frame-rate rule).
 
     Args:
         colour_times: (N,) seconds, in rgb.txt order.
@@ -241,7 +249,15 @@ def associate(
         pose_times: (K,) seconds, or None without ground truth.
         max_dt: largest time difference, seconds.
         frame_rate: highest frame rate kept, Hz.
+        pairing: "release" or "associate" (``data.pairing``).
     """
+    if pairing == "associate":
+        colour, depth = unique_pairs(colour_times, depth_times)
+        if pose_times is None:
+            return Association(colour, depth, None)
+        pose = nearest(pose_times, colour_times[colour])
+        timed = np.abs(pose_times[pose] - colour_times[colour]) < max_dt
+        return Association(colour[timed], depth[timed], pose[timed])
     depth = nearest(depth_times, colour_times)
     matched = np.abs(depth_times[depth] - colour_times) < max_dt
     pose = None
@@ -316,6 +332,7 @@ class TUMSequence(FileSequence):
             colour.timestamps,
             depth.timestamps,
             None if groundtruth is None else groundtruth.timestamps,
+            pairing=options.pairing,
         )
         if len(pairs.colour) == 0:
             with_pose = "" if groundtruth is None else f" and a pose in {gt_path.name}"
