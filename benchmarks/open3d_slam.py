@@ -10,7 +10,10 @@ per second, machine) into ``--out`` and prints one markdown row.
 
     pip install "eslam[bench]"   # Open3D
     python benchmarks/open3d_slam.py --config tum/tum_cpu \\
-        --data .../rgbd_dataset_freiburg1_xyz --out /tmp/open3d_fr1_xyz [--frames 200]
+        --data .../rgbd_dataset_freiburg1_xyz --out /tmp/open3d_fr1_xyz [--frames 200] \\
+        [data.pairing=release]
+
+Trailing KEY=VALUE arguments override ``--config`` (how its frames are read).
 
 Open3D's defaults (its example): voxel 3/512 m, 16^3 voxels a block, 40000 blocks,
 depth 0.1-3 m, truncation 8 voxels, ICP distance threshold 0.07 m.
@@ -120,11 +123,12 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--trunc-voxels", type=float, default=8.0)
     parser.add_argument("--icp-distance", type=float, default=0.07)
     parser.add_argument("--threads", type=int, default=1, help="(Open3D: OMP_NUM_THREADS)")
+    parser.add_argument("overrides", nargs="*", help="KEY=VALUE overrides of --config")
     args = parser.parse_args(argv)
     o3d = open3d()
     torch.set_num_threads(args.threads)
     try:
-        config = load_config(args.config, [f"data.path={args.data}"])
+        config = load_config(args.config, [*args.overrides, f"data.path={args.data}"])
         sequence = open_sequence(config.data)
         count = len(sequence) if args.frames is None else min(args.frames, len(sequence))
         frames = [sequence[i] for i in range(count)]

@@ -41,3 +41,14 @@ def test_open3d_tracks_the_first_frames_of_fr1_xyz(real_data: Path, tmp_path: Pa
     assert metrics["ate_rmse_cm"] < 3.0
     moved = np.linalg.norm(estimate[-1, 1:4] - estimate[0, 1:4])
     assert moved > 0.05  # fr1/xyz moves ~10 cm in its first second: not a held pose
+
+
+def test_overrides_change_how_the_frames_are_read(real_data: Path, tmp_path: Path, capsys) -> None:
+    pytest.importorskip("open3d", reason="the bench extra (Open3D) is not installed")
+    script = load_script(SCRIPT)
+    data = real_data / "tum-fr1-xyz"
+    with pytest.raises(SystemExit) as stop:
+        script.main(["--data", str(data), "--out", str(tmp_path / "out"), "data.pairing=any"])
+    assert stop.value.code == 2
+    assert "pairing" in capsys.readouterr().err
+    assert not (tmp_path / "out").exists()

@@ -128,3 +128,11 @@ def test_sensor_presets_start_from_features_and_map_what_is_new(name: str) -> No
     config = load_config(CONFIGS / name)
     assert config.tracking.start == "features"
     assert config.tracking.observed_only and config.mapping.keyframe_coverage == 0.8
+
+
+def test_the_tum_cpu_preset_reads_every_frame_associate_py_pairs() -> None:
+    """docs/results.md "TUM RGB-D fr1/xyz, whole sequence": 792 frames, no worse than the
+    release's 759; the paper's TUM configs keep the release's rule."""
+    assert load_config(CONFIGS / "tum" / "tum_cpu.yaml").data.pairing == "associate"
+    for name in ("tum", "fr1_desk", "fr1_xyz", "fr2_xyz", "fr3_office"):
+        assert load_config(CONFIGS / "tum" / f"{name}.yaml").data.pairing == "release"
