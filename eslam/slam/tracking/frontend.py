@@ -155,7 +155,7 @@ class TrackingFrontEnd:
             if not quality.failed and recovery.doubts(state) and not recovery.passes(quality):
                 pose, quality = guess, replace(quality, failed=True)
             if quality.failed:
-                found = recovery.recover(frame, whole, guess, state)
+                found = recovery.recover(frame, whole, guess, state, query)
                 if found is not None:
                     pose, quality = found.pose, found.quality
         if self.feature_start is not None and query is not None:

@@ -40,7 +40,7 @@ import torch
 from eslam.config import RecoveryConfig
 from eslam.geometry.pose import pose_distance
 from eslam.slam.context import RunContext
-from eslam.slam.places.index import PlaceMatch, Places, describe
+from eslam.slam.places.index import Place, PlaceMatch, Places, describe
 from eslam.slam.state import SLAMState, failed_row, failed_stretch, untracked_row
 from eslam.slam.tracking.base import Recovery as How
 from eslam.slam.tracking.base import Tracker, TrackingQuality, judged
@@ -80,11 +80,17 @@ class Recovery:
         self.places = Places() if places is None else places
 
     def recover(
-        self, frame: Frame, view: View, guess: torch.Tensor, state: SLAMState
+        self,
+        frame: Frame,
+        view: View,
+        guess: torch.Tensor,
+        state: SLAMState,
+        place: Place | None = None,
     ) -> Recovered | None:
         """The first of the module doc's tries that passes for ``frame`` (``view``: its
         images, no filter applied), whose try from ``guess`` failed; None when none
-        passes."""
+        passes. ``place``: the frame already described (the feature start's), else it
+        is described when relocalising."""
         best = None
         for start, keyframe in self.starts(guess, state):
             found = self.attempt(view, start, state)
@@ -94,7 +100,7 @@ class Recovery:
             return tagged(best[0], "start", best[1])
         lost = failed_stretch(state.tracking_quality) + 1
         if self.settings.relocalise_after and lost >= self.settings.relocalise_after:
-            return self.relocalise(frame, view, state)
+            return self.relocalise(frame, view, state, place)
         return None
 
     def doubts(self, state: SLAMState) -> bool:
@@ -144,12 +150,14 @@ class Recovery:
                 tried.append(pose)
         return chosen
 
-    def relocalise(self, frame: Frame, view: View, state: SLAMState) -> Recovered | None:
+    def relocalise(
+        self, frame: Frame, view: View, state: SLAMState, place: Place | None = None
+    ) -> Recovered | None:
         """Step 2 of the module doc: the most alike keyframes, verified by tracking
         (each refused candidate is logged)."""
         store = state.keyframes
         places = self.places.of(store)
-        query = describe(frame.rgb, frame.depth, store)
+        query = describe(frame.rgb, frame.depth, store) if place is None else place
         best = None
         for k, similarity in places.alike(query, self.settings.candidates):
             match = places.locate(query, k, self.settings.min_matches, seed=state.next_frame)
