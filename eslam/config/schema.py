@@ -628,6 +628,10 @@ class MappingConfig:
     """Adam learning rate of the window's keyframe poses (paper)."""
     optimise_poses: bool = True
     """Refine keyframe poses with the map (paper's BA); off is ablation h."""
+    carry_frames: bool = False
+    """The frames between two keyframes follow the keyframes' refined poses (blended by
+    where they lie between them: eslam/slam/mapping/carry.py); false = they keep their
+    tracked pose (paper, release)."""
     keyframe_device: str | None = None
     """Device holding keyframe images (uint8 colour, 16-bit depth); null = the run's device."""
     view_cache_mb: float = 1024.0

@@ -41,6 +41,7 @@ from eslam.slam.mapping.bounds_policy import (
     check_some_depth,
     cover_keyframe,
 )
+from eslam.slam.mapping.carry import carried_poses, corrections
 from eslam.slam.mapping.keyframe_views import KeyframeViews
 from eslam.slam.mapping.keyframes import KeyframeSchedule
 from eslam.slam.mapping.mapper import (
@@ -279,12 +280,28 @@ class KeyframeBackEnd:
         trajectory, the observers hear of it, loop closure looks at the new keyframe."""
         moved = [i for i, flag in enumerate(job.optimise) if flag]
         if moved:
-            state.trajectory.set_poses([job.window[i] for i in moved], result.poses[moved])
+            frames = [job.window[i] for i in moved]
+            before = state.trajectory.poses[frames]
+            state.trajectory.set_poses(frames, result.poses[moved])
+            if self.context.config.mapping.carry_frames:
+                self._carry(state, frames, before)
         self.context.observers.on_mapping(
             MappingDone(job.index, job.window, job.schedule.iterations, result.loss)
         )
         if self.loops is not None:
             self.loops.after_keyframe(job.index, job.keyframe, state)
+
+    def _carry(self, state: SLAMState, frames: list[int], before: torch.Tensor) -> None:
+        """The frames between keyframes follow the keyframes ``frames`` that the call
+        moved from ``before`` (``mapping.carry_frames``, :mod:`eslam.slam.mapping.carry`)."""
+        trajectory = state.trajectory
+        poses = trajectory.poses.double()
+        change = corrections(before.double(), poses[frames])
+        carried, poses = carried_poses(
+            poses, state.keyframes.frame_indices, dict(zip(frames, change, strict=True))
+        )
+        if carried:
+            trajectory.set_poses(carried, poses)
 
     def follow_correction(self, state: SLAMState, moved: list[int]) -> None:
         """The map follows a loop correction (``mapping.loops.map``) that moved the
