@@ -8,7 +8,7 @@ tracked rate after the first frame, the first frame's wall time, the ATE over th
 tracked frames, the tracker's lag behind the camera (mean and largest), mapping calls
 and keyframes replaced (docs/live.md, "Mapping beside the tracker").
 
-    python benchmarks/realtime_replay.py --config tum/tum_live \\
+    python benchmarks/realtime_replay.py --config tum/tum_cpu \\
         --data .../rgbd_dataset_freiburg1_xyz --out /tmp/replay threads=1
     python benchmarks/realtime_replay.py --config sevenscenes/redkitchen_cpu \\
         --data .../7scenes-redkitchen --out /tmp/replay7 threads=1 data.replay_fps=30
