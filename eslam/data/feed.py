@@ -4,7 +4,9 @@
 
 - real time (``data.realtime``, always for a live source): a
   :class:`~eslam.data.realtime.LatestFrameReader`, dropping frames that arrive while the
-  loop is busy; a recording is replayed at its recorded rate (or ``data.replay_fps``);
+  loop is busy; a recording is replayed at its recorded rate (or ``data.replay_fps``),
+  each frame read only when the loop takes it where the recording allows
+  (:func:`pending_frames`);
 - otherwise, with ``data.prefetch`` > 0: a :class:`~eslam.data.prefetch.PrefetchedFrames`
   reading that many frames ahead (the same frames in the same order);
 - otherwise the source itself.
@@ -14,13 +16,16 @@ Use the feed as a context manager around the loop: leaving it stops its thread.
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
+from functools import partial
 from types import TracebackType
 
 from eslam.config import DataConfig
 from eslam.data.prefetch import PrefetchedFrames, ReaderThread
-from eslam.data.realtime import LatestFrameReader, ReplayPace
+from eslam.data.realtime import LatestFrameReader, Pending, ReplayPace
+from eslam.data.selection import sequence_timestamps
+from eslam.data.source import SequenceSource
 from eslam.types import Frame
 
 
@@ -28,6 +33,22 @@ def is_live(source: object) -> bool:
     """Whether ``source`` is a live sensor (its ``live`` attribute; recordings have none):
     a live source always runs in real time and cannot be resumed."""
     return bool(getattr(source, "live", False))
+
+
+def pending_frames(source: object) -> Iterator[Pending] | None:
+    """A recorded sequence's frames as :class:`~eslam.data.realtime.Pending` ones, read
+    when a replay's loop takes them; None when ``source`` cannot read a frame on demand
+    or its reader has no timestamps of its own (reading them would read every frame)."""
+    if not isinstance(source, SequenceSource):
+        return None
+    sequence = source.sequence
+    if getattr(sequence, "timestamps", None) is None:
+        return None
+    stamps = sequence_timestamps(sequence)
+    return (
+        Pending(float(stamps[index]), partial(source.frame, index))
+        for index in range(source.start, len(sequence))
+    )
 
 
 def runs_in_real_time(source: object, data: DataConfig) -> bool:
@@ -63,7 +84,8 @@ def open_feed(source: Iterable[Frame], data: DataConfig, name: str) -> Feed:
     (module doc); its thread starts when the ``with`` block is entered."""
     if runs_in_real_time(source, data):
         pace = None if is_live(source) else ReplayPace(data.replay_fps, name)
-        reader = LatestFrameReader(source, pace)
+        pending = None if pace is None else pending_frames(source)
+        reader = LatestFrameReader(source if pending is None else pending, pace)
         return Feed(reader, reader)
     if data.prefetch > 0:
         return Feed(PrefetchedFrames(source, data.prefetch), None)

@@ -10,7 +10,11 @@ received = handed to the loop + dropped.
 A recorded stream replayed in real time emulates its sensor (:class:`ReplayPace`):
 frame i is released ``timestamp_i - timestamp_0`` seconds after the first, or
 ``i / fps`` seconds with ``data.replay_fps`` (recordings whose timestamps are frame
-numbers need it: :func:`timestamps_are_frame_numbers`). A live source (a camera:
+numbers need it: :func:`timestamps_are_frame_numbers`). A camera's frames come decoded,
+so a recording that can read any frame on demand is released as :class:`Pending`
+frames (their timestamps only) and the loop reads a frame when it takes it: a dropped
+frame costs no decoding (decoding fr1/xyz's 30 frames a second takes most of a CPU
+core, which a camera would leave to the run). A live source (a camera:
 ``FrameSource.live``) paces itself.
 
 Errors reading a frame are raised in the loop's thread after the frame waiting before
@@ -69,6 +73,19 @@ class ReplayPace:
         return timestamp - first
 
 
+@dataclass(frozen=True, eq=False)
+class Pending:
+    """A recorded frame released in a replay, read when the loop takes it (module doc).
+
+    Attributes:
+        timestamp: the frame's timestamp (what the replay is paced by).
+        read: reads the frame.
+    """
+
+    timestamp: float
+    read: Callable[[], Frame]
+
+
 @dataclass(frozen=True)
 class StreamCounts:
     """What a real-time reader saw so far.
@@ -101,7 +118,8 @@ class LatestFrameReader(ReaderThread):
     Use as a context manager; iterate it once inside the ``with`` block.
 
     Args:
-        source: the frames (a live source, or a recording replayed with ``pace``).
+        source: the frames (a live source, or a recording replayed with ``pace``: its
+            frames, or :class:`Pending` ones read when the loop takes them).
         pace: how to release a recording's frames; None: as fast as the source gives them
             (a live source paces itself).
         clock: seconds, monotonic (tests pass their own).
@@ -113,7 +131,7 @@ class LatestFrameReader(ReaderThread):
 
     def __init__(
         self,
-        source: Iterable[Frame],
+        source: Iterable[Frame] | Iterable[Pending],
         pace: ReplayPace | None = None,
         clock: Callable[[], float] = time.monotonic,
     ) -> None:
@@ -122,7 +140,7 @@ class LatestFrameReader(ReaderThread):
         self._clock = clock
         self._ready = threading.Condition()
         self._stop = threading.Event()
-        self._slot: tuple[int, Frame, float] | None = None
+        self._slot: tuple[int, Frame | Pending, float] | None = None
         self._ended = False
         self._failure: BaseException | None = None
         self._received = 0
@@ -136,7 +154,7 @@ class LatestFrameReader(ReaderThread):
 
     def _read(self) -> None:
         """The thread: release frames into the slot until the source ends or it must stop."""
-        iterator: Iterator[Frame] | None = None
+        iterator: Iterator[Frame] | Iterator[Pending] | None = None
         try:
             iterator = iter(self._source)
             start: tuple[float, float] | None = None  # (clock, first timestamp)
@@ -170,7 +188,7 @@ class LatestFrameReader(ReaderThread):
         if self._pace is not None and timestamps_are_frame_numbers(np.array([first, second])):
             raise replay_pace_error(self._pace.name)
 
-    def _offer(self, position: int, frame: Frame) -> None:
+    def _offer(self, position: int, frame: Frame | Pending) -> None:
         with self._ready:
             if self._slot is not None:
                 self._replaced += 1
@@ -193,11 +211,12 @@ class LatestFrameReader(ReaderThread):
                 self._slot = None
                 self.source_indices.append(position)
                 self._arrivals.append(arrival)
-                return frame
-            if self._failure is not None:
+            elif self._failure is not None:
                 failure, self._failure = self._failure, None
                 raise failure
-            raise StopIteration
+            else:
+                raise StopIteration
+        return frame.read() if isinstance(frame, Pending) else frame
 
     def age_s(self, delivered: int) -> float:
         """Seconds since the ``delivered``-th frame handed to the loop (0-based) arrived:

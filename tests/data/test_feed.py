@@ -18,7 +18,7 @@ from eslam.data.realtime import (
     ReplayPace,
     timestamps_are_frame_numbers,
 )
-from eslam.data.source import IterableSource
+from eslam.data.source import IterableSource, SequenceSource
 from eslam.errors import ConfigError, InputError
 from eslam.types import Frame, Intrinsics
 
@@ -125,6 +125,43 @@ def test_a_slow_loop_gets_the_newest_frames_never_reordered_and_counts_add_up() 
     assert got[-1] == 59  # the stream's last frame is never dropped when it ends
     assert counts.received_fps > 100
     assert no_feed_threads()
+
+
+class CountingSequence:
+    """A recording at 1000 fps that counts the frames read from it."""
+
+    def __init__(self, length: int) -> None:
+        self.length, self.reads = length, []
+        self.intrinsics, self.root = CAMERA, Path("/rec")
+
+    def __len__(self) -> int:
+        return self.length
+
+    def __getitem__(self, index: int) -> Frame:
+        self.reads.append(index)
+        return frame(index, timestamp=self.timestamps()[index])
+
+    def timestamps(self) -> np.ndarray:
+        return 5.0 + np.arange(self.length) / 1000.0
+
+
+def test_a_replayed_recording_reads_only_the_frames_the_loop_takes() -> None:
+    sequence = CountingSequence(60)
+    source = SequenceSource(sequence, start=10)  # type: ignore[arg-type]
+    feed = open_feed(source, DataConfig(realtime=True), "rec")
+    got = []
+    with feed:
+        for item in feed.frames:
+            got.append((item.index, item.timestamp))
+            time.sleep(0.02)  # 20x slower than the stream: most frames are dropped
+    assert feed.stream is not None
+    counts = feed.stream.counts()
+    assert counts.received == 50 and counts.replaced == 50 - len(got) > 0
+    # what a camera gives: a dropped frame was never read (decoded), a taken one once
+    assert sequence.reads == [index for index, _ in got]
+    assert got[-1][0] == 59 and got[0][0] == 10
+    assert [stamp for _, stamp in got] == [5.0 + index / 1000.0 for index, _ in got]
+    assert [index - 10 for index, _ in got] == feed.stream.source_indices
 
 
 def test_a_replay_keeps_the_recorded_rate() -> None:
