@@ -26,6 +26,7 @@ METRICS: tuple[tuple[str, str, str], ...] = (
     ("fpt_s", "Frame processing time", "s"),
     ("fps_wall", "FPS (wall clock)", ""),
     ("fps_wall_after_first", "FPS after the first frame", ""),
+    ("fps_poses_after_first", "Poses per second after the first frame", ""),
     ("fps_tracking", "FPS, tracking only (Co-SLAM)", ""),
     ("first_frame_s", "First frame", "s"),
     ("frames_received", "Frames received (real time)", ""),

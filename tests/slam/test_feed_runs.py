@@ -103,11 +103,14 @@ def test_a_hidden_progress_bar_reads_nothing_from_the_run() -> None:
 
 
 def test_speed_metrics_follow_their_definitions() -> None:
-    metrics = speed_metrics(WallTime(frames=11, wall_s=12.0, first_frame_s=2.0), [0.5] * 11)
+    wall = WallTime(frames=11, wall_s=12.0, first_frame_s=2.0, poses_s=8.0)
+    metrics = speed_metrics(wall, [0.5] * 11)
     assert metrics["fps_wall"] == pytest.approx(11 / 12.0)
     assert metrics["fps_wall_after_first"] == pytest.approx(10 / 10.0)
+    assert metrics["fps_poses_after_first"] == pytest.approx(10 / 8.0)  # final call left out
     assert metrics["fps_tracking"] == pytest.approx(11 / 5.5)  # Co-SLAM: frames / tracking s
-    assert "fps_wall_after_first" not in speed_metrics(WallTime(1, 2.0, 2.0), [0.0])
+    alone = speed_metrics(WallTime(1, 2.0, 2.0), [0.0])
+    assert "fps_wall_after_first" not in alone and "fps_poses_after_first" not in alone
 
 
 def test_a_real_time_replay_drops_frames_in_order_and_pairs_the_right_ground_truth(

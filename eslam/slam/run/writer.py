@@ -62,11 +62,13 @@ class WallTime:
             included; the mesh and the final checkpoint not).
         first_frame_s: seconds of the first of those frames (with the map's first
             mapping call for a new run), None before it was done.
+        poses_s: seconds from the first frame's pose to the last frame's (0 before two).
     """
 
     frames: int
     wall_s: float
     first_frame_s: float | None
+    poses_s: float = 0.0
 
 
 def speed_metrics(wall: WallTime, tracking_time: list[float]) -> dict:
@@ -75,6 +77,9 @@ def speed_metrics(wall: WallTime, tracking_time: list[float]) -> dict:
     - ``fps_wall`` = frames / wall_s: what a user waits for, everything included;
     - ``fps_wall_after_first`` = (frames - 1) / (wall_s - first_frame_s): the same without
       the first frame (the first mapping call and warm-up), the steady rate;
+    - ``fps_poses_after_first`` = (frames - 1) / poses_s: the rate poses came at after
+      the first, the final mapping call left out (what a live user sees while the camera
+      runs; equal to the above but for that call when mapping is in turn);
     - ``fps_tracking`` = frames / total tracking time, over all the run's frames:
       Co-SLAM's definition (mapping and everything else left out), for comparison only.
     """
@@ -86,6 +91,8 @@ def speed_metrics(wall: WallTime, tracking_time: list[float]) -> dict:
         steady = wall.wall_s - wall.first_frame_s
         if wall.frames > 1 and steady > 0:
             metrics["fps_wall_after_first"] = (wall.frames - 1) / steady
+        if wall.frames > 1 and wall.poses_s > 0:
+            metrics["fps_poses_after_first"] = (wall.frames - 1) / wall.poses_s
     tracking = float(np.sum(tracking_time))
     if tracking > 0:
         metrics["fps_tracking"] = len(tracking_time) / tracking
@@ -204,6 +211,7 @@ class RunWriter(RunObserverBase):
         self._began = 0.0
         self._first_done: float | None = None
         self._last_done = 0.0
+        self._last_pose = 0.0  # when the last frame's pose was done
         self.lags_s: list[float] = []  # real time: per frame, its age when its pose was done
 
     def on_start(self, start: RunStart) -> None:
@@ -215,10 +223,11 @@ class RunWriter(RunObserverBase):
     def _wall_time(self, frames: int) -> WallTime:
         """This process's wall time up to now, over its ``frames`` frames."""
         first = None if self._first_done is None else self._first_done - self._began
-        return WallTime(frames, self._last_done - self._began, first)
+        poses = 0.0 if self._first_done is None else self._last_pose - self._first_done
+        return WallTime(frames, self._last_done - self._began, first, poses)
 
     def on_frame(self, frame: FrameDone) -> None:
-        self._last_done = self.clock()
+        self._last_done = self._last_pose = self.clock()
         if self.stream is not None:  # a real-time run starts at frame 0: index = delivered
             self.lags_s.append(self.stream.age_s(frame.index))
         if self._first_done is None:
