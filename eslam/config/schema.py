@@ -585,11 +585,16 @@ class MappingConfig:
     every: int = 4
     """Map every k-th frame (plus the last); every mapped frame becomes a keyframe."""
     concurrent: bool | None = None
-    """Map beside the tracker (eslam/slam/mapping/concurrent.py, docs/live.md): mapping calls
-    run in a thread while frames are tracked on the last whole map, a newer keyframe
-    replacing one still waiting. null = on in real time (``--realtime``, a live camera)
-    unless loop closure is on, off for recorded data (in turn: deterministic); a resumed
-    run maps in turn."""
+    """Map beside the tracker (eslam/slam/mapping/concurrent_mapping.py, docs/live.md):
+    mapping calls run in a worker (``concurrent_worker``) while frames are tracked on the
+    last whole map, a newer keyframe replacing one still waiting. null = on in real time
+    (``--realtime``, a live camera) unless loop closure is on, off for recorded data (in
+    turn: deterministic); a resumed run maps in turn."""
+    concurrent_worker: Literal["auto", "thread", "process"] = "auto"
+    """Where a concurrent run maps (eslam/slam/mapping/workers.py): a process of its own
+    (CPU only: the tracker and the mapper then share no Python interpreter), a thread of
+    the run's process (on CUDA, on a stream of its own); auto = the process on a CPU,
+    the thread on a GPU."""
     keyframe_coverage: float = 0.0
     """Also make a tracked frame a keyframe when less than this share of its pixels lay
     in observed space (needs ``tracking.observed_only``, which measures the share): the
@@ -620,6 +625,10 @@ class MappingConfig:
     """Adam steps of the tsdf warm start."""
     first_warm_start_points: int = 4000
     """Points per step of the tsdf warm start (one geometry query each, no rendering)."""
+    first_warm_start_lead: int | None = None
+    """Mapping beside the tracker (``concurrent``): the warm-start steps run before the
+    tracker gets the map; the others run beside it, before the first call's rendering
+    steps (the first pose comes sooner, on a rougher map). null = all of them."""
     lr_decoders: float = 0.001
     """Adam learning rate of the decoders and beta (paper)."""
     lr_planes: float = 0.005
@@ -659,6 +668,8 @@ class MappingConfig:
         _at_least(self, "first_iterations", 0)
         _at_least(self, "first_warm_start_steps", 0)
         _at_least(self, "first_warm_start_points", 1)
+        if self.first_warm_start_lead is not None:
+            _at_least(self, "first_warm_start_lead", 0)
         if self.first_warm_start not in ("none", "tsdf"):
             raise ValueError(
                 f"first_warm_start must be none or tsdf, got {self.first_warm_start!r}"

@@ -63,6 +63,14 @@ class RunLoop:
         On any error the frame in progress is rolled back before the error propagates;
         Ctrl-C with ``end_on_interrupt`` ends the stream instead (class doc).
         """
+        try:
+            return self._run(frames, total, stop_after)
+        finally:
+            close = getattr(self.back_end, "close", None)  # optional, as settle is
+            if close is not None:
+                close()  # a worker beside the tracker ends, however the run ended
+
+    def _run(self, frames: Iterable[Frame], total: int | None, stop_after: int | None) -> RunEnd:
         state = self.state
         self._total = total
         began = time.perf_counter()

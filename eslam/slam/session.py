@@ -38,6 +38,7 @@ from eslam.slam.context import RunContext
 from eslam.slam.loop import RunLoop
 from eslam.slam.loops.pose_graph import import_gtsam
 from eslam.slam.mapping.backend import BackEnd, make_back_end
+from eslam.slam.mapping.workers import worker_kind
 from eslam.slam.run.folder import (
     absolute_data_path,
     check_saved_frames,
@@ -253,6 +254,7 @@ def run_slam(
     config = resolve_config(config)
     device = resolve_device(config.device)
     PLANE_SAMPLINGS.check(config.field.plane_sampling, device)
+    worker_kind(config.mapping.concurrent_worker, device)  # the process only on a CPU
     if config.mapping.loops.enabled:
         import_gtsam()  # a missing extra is named before the run folder is touched
     if resume:

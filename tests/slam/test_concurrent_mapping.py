@@ -18,8 +18,15 @@ from eslam.data import open_sequence
 from eslam.data.source import IterableSource
 from eslam.errors import ConfigError
 from eslam.field.scene_field import SceneField
-from eslam.slam.mapping.concurrent_mapping import ConcurrentBackEnd, copy_field, same_layout
-from eslam.slam.mapping.mapper import MappingResult
+from eslam.slam.mapping.concurrent_mapping import (
+    ConcurrentBackEnd,
+    copy_field,
+    same_layout,
+    split_warm_start,
+)
+from eslam.slam.mapping.mapper import MappingResult, MappingSchedule
+from eslam.slam.mapping.warm_start import WarmStart
+from eslam.slam.mapping.workers import ProcessWorker
 from eslam.slam.run.observers import FrameDone, RunObserverBase
 from eslam.slam.session import Components, concurrent_mapping, run_slam
 from eslam.slam.state import load_state
@@ -88,21 +95,31 @@ class VersionReader:
 
 
 @pytest.mark.slow
+@pytest.mark.parametrize("worker", ["thread", "process"])
 def test_the_tracker_reads_only_whole_maps_from_a_slow_mapper(
-    tiny_sequence: Path, tmp_path: Path
+    tiny_sequence: Path, tmp_path: Path, worker: str
 ) -> None:
     mapper, reader = SlowMapper(), VersionReader()
+    built: list[ConcurrentBackEnd] = []
 
     def back_end(context) -> ConcurrentBackEnd:
-        built = ConcurrentBackEnd(context)
-        built.mapper = mapper
-        return built
+        built.append(ConcurrentBackEnd(context))
+        built[0].mapper = mapper
+        return built[0]
 
     config = tiny_config(
-        tiny_sequence, *CONCURRENT, "mapping.first_warm_start=none", "output.mesh=false"
+        tiny_sequence,
+        *CONCURRENT,
+        "mapping.first_warm_start=none",
+        "output.mesh=false",
+        f"mapping.concurrent_worker={worker}",
     )
     run_slam(config, tmp_path / "run", components=Components(lambda _: reader, back_end))
-    assert mapper.threads and threading.get_ident() not in mapper.threads  # beside the loop
+    assert built[0].worker is not None and built[0].worker.kind == worker
+    if worker == "thread":  # beside the loop, in a thread of its own
+        assert mapper.threads and threading.get_ident() not in mapper.threads
+    else:  # the process mapped a copy of the mapper: this one never ran
+        assert mapper.version == 0 and not mapper.threads
     assert len(reader.seen) == TINY_FRAMES - 1
     versions = []
     for seen in reader.seen:  # the map before the first call (random), or one version
@@ -113,16 +130,32 @@ def test_the_tracker_reads_only_whole_maps_from_a_slow_mapper(
     assert versions == sorted(versions) and len(set(versions)) >= 3, reader.seen
 
 
+def started_processes(monkeypatch: pytest.MonkeyPatch) -> list:
+    """The mapping processes the run starts (the list fills as they start)."""
+    started: list = []
+    start = ProcessWorker._start
+
+    def recorded(worker: ProcessWorker) -> None:
+        start(worker)
+        started.append(worker.process)
+
+    monkeypatch.setattr(ProcessWorker, "_start", recorded)
+    return started
+
+
 @pytest.mark.slow
 def test_a_stopped_concurrent_run_holds_whole_calls_and_resumes_in_turn(
-    tiny_sequence: Path, tmp_path: Path
+    tiny_sequence: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     config = tiny_config(tiny_sequence, *CONCURRENT)
     run = tmp_path / "run"
+    processes = started_processes(monkeypatch)
     stopped = run_slam(config, run, stop_after=6)
     # the call in flight and the waiting keyframe were mapped before map.pt was written
     assert stopped.metrics["mapping_calls"] == keyframes_of(run, config)
+    assert stopped.metrics["mapping_worker"] == "process"  # auto, on a CPU
     assert not any(t.name.startswith("eslam-mapping") for t in threading.enumerate())
+    assert len(processes) == 1 and processes[0].poll() == 0  # one process, ended cleanly
     resumed = run_slam(load_config(run / "config.yaml"), run, resume=True)
     assert len(resumed.poses) == TINY_FRAMES
     assert "a resumed run maps in turn" in (run / "log.txt").read_text()
@@ -136,7 +169,16 @@ def test_a_real_time_replay_maps_beside_and_accounts_for_every_frame(
 ) -> None:
     # real time maps beside the tracker unless told otherwise; a replay faster than this
     # machine drops frames, and every frame received is processed or dropped
-    config = tiny_config(tiny_sequence, *QUICK, "data.realtime=true", "data.replay_fps=200")
+    config = tiny_config(
+        tiny_sequence,
+        *QUICK,
+        "data.realtime=true",
+        "data.replay_fps=200",
+        "mapping.first_warm_start=tsdf",
+        "mapping.first_warm_start_steps=20",
+        "mapping.first_warm_start_points=500",
+        "mapping.first_warm_start_lead=5",  # the rest of the warm start in the worker
+    )
     result = run_slam(config, tmp_path / "rt")
     metrics = result.metrics
     assert metrics["mapping_concurrent"] is True
@@ -146,6 +188,9 @@ def test_a_real_time_replay_maps_beside_and_accounts_for_every_frame(
     assert len(timings["lag_s"]) == metrics["frames"] == len(timings["source_index"])
     assert 0 <= metrics["tracking_lag_s_mean"] <= metrics["tracking_lag_s_max"]
     assert timings["source_index"][-1] == TINY_FRAMES - 1  # the newest is processed
+    # ... and mapped at the end, every keyframe kept by a whole call
+    assert f"mapped frame {metrics['frames'] - 1}:" in (tmp_path / "rt" / "log.txt").read_text()
+    assert metrics["mapping_calls"] == keyframes_of(tmp_path / "rt", config)
 
 
 class CtrlCAt(RunObserverBase):
@@ -161,7 +206,7 @@ class CtrlCAt(RunObserverBase):
 
 @pytest.mark.slow
 def test_ctrl_c_in_a_concurrent_live_run_waits_for_the_call_and_saves(
-    tiny_sequence: Path, tmp_path: Path
+    tiny_sequence: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     config = tiny_config(tiny_sequence, *QUICK)
     sequence = open_sequence(config.data)
@@ -174,7 +219,9 @@ def test_ctrl_c_in_a_concurrent_live_run_waits_for_the_call_and_saves(
             time.sleep(0.01)
 
     source = IterableSource(sequence.intrinsics, camera(), name="camera", live=True)
+    processes = started_processes(monkeypatch)
     result = run_slam(config, tmp_path / "live", source=source, observers=[CtrlCAt(4)])
+    assert len(processes) == 1 and processes[0].poll() == 0
     run = tmp_path / "live"
     for name in ("map.pt", "trajectory.txt", "mesh.ply", "metrics.json"):
         assert (run / name).is_file(), name
@@ -198,6 +245,67 @@ def test_a_finished_call_reaches_the_tracker_in_place_or_as_a_new_field() -> Non
     grown = copy_field(mapped, tracker)
     assert grown is not tracker and grown is not mapped  # the mapper keeps its own
     np.testing.assert_array_equal(grown.bound.numpy(), mapped.bound.numpy())
+
+
+class RecordingMapper:
+    """The run's mapper, recording each call's (warm-start steps, rendering steps)."""
+
+    def __init__(self, mapper) -> None:
+        self.mapper = mapper
+        self.calls: list[tuple[int, int]] = []
+
+    def map(self, field, views, poses, optimise, schedule, generator, on_step=None):
+        warm = 0 if schedule.warm_start is None else schedule.warm_start.steps
+        self.calls.append((warm, schedule.iterations))
+        return self.mapper.map(field, views, poses, optimise, schedule, generator)
+
+
+@pytest.mark.slow
+def test_a_warm_start_lead_gives_the_tracker_the_worker_s_steps_before_rendering(
+    tiny_sequence: Path, tmp_path: Path
+) -> None:
+    built: list[ConcurrentBackEnd] = []
+
+    def back_end(context) -> ConcurrentBackEnd:
+        built.append(ConcurrentBackEnd(context))
+        built[0].mapper = RecordingMapper(built[0].mapper)
+        return built[0]
+
+    config = tiny_config(
+        tiny_sequence,
+        *CONCURRENT,
+        "mapping.concurrent_worker=thread",  # the recording mapper runs in this process
+        "mapping.first_warm_start=tsdf",
+        "mapping.first_warm_start_steps=40",
+        "mapping.first_warm_start_points=500",
+        "mapping.first_warm_start_lead=10",
+        "output.mesh=false",
+    )
+    result = run_slam(config, tmp_path / "run", components=Components(back_end=back_end))
+    calls = built[0].mapper.calls
+    first_iterations = config.mapping.first_iterations
+    # the first keyframe: 10 steps before the first pose, then the worker's 30 on their
+    # own (published to the tracker), then its rendering steps; one call counted
+    assert calls[0] == (30, 0) and calls[1] == (0, first_iterations), calls
+    assert all(call == (0, config.mapping.iterations) for call in calls[2:]), calls
+    assert (
+        result.metrics["mapping_calls"] == len(calls) - 1 == keyframes_of(tmp_path / "run", config)
+    )
+
+
+def test_a_warm_start_lead_splits_the_steps_between_the_first_pose_and_the_worker() -> None:
+    first = MappingSchedule(30, 2.0, 2000, warm_start=WarmStart(400, 4000))
+    lead, rest = split_warm_start(first, 100)
+    assert lead.warm_start == WarmStart(100, 4000)  # before the tracker gets the map
+    assert rest.warm_start == WarmStart(300, 4000)  # in the worker, before ...
+    assert rest.iterations == 30 and rest.lr_factor == 2.0  # ... the rendering steps
+    lead, rest = split_warm_start(first, None)  # all before the first pose (the default)
+    assert lead.warm_start == WarmStart(400, 4000) and rest.warm_start is None
+    assert split_warm_start(first, 1000)[1].warm_start is None
+    with pytest.raises(ValueError, match="warm start"):
+        split_warm_start(MappingSchedule(30, 2.0, 2000), 10)
+    with pytest.raises(ConfigError, match="first_warm_start_lead"):
+        load_config(DEMO_CONFIG, ["mapping.first_warm_start_lead=-1"])
 
 
 def test_concurrent_mapping_with_loop_closure_is_refused_or_not_chosen() -> None:

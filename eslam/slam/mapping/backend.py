@@ -114,6 +114,11 @@ class BackEnd(Protocol):
         """Undo the frame begun at ``mark`` (its mapping call included)."""
         ...
 
+    def close(self) -> None:
+        """The run is over, however it ended: release what the back end holds (a worker
+        beside the tracker). Optional, as :meth:`settle` is."""
+        ...
+
 
 class KeyframeBackEnd:
     """The paper's back end (module doc)."""

@@ -1,9 +1,11 @@
-"""Mapping beside tracking (``mapping.concurrent``): the back end's calls in a thread.
+"""Mapping beside tracking (``mapping.concurrent``): the back end's calls in a worker.
 
 :class:`ConcurrentBackEnd` chooses keyframes as :class:`~eslam.slam.mapping.backend.
-KeyframeBackEnd` does, but runs each mapping call in a worker thread (on a GPU, on a CUDA
-stream of its own: :class:`MappingWorker`) while the run loop goes on tracking. What the
-two threads touch is owned by one of them at a time and handed over explicitly:
+KeyframeBackEnd` does, but hands each mapping call to a worker while the run loop goes on
+tracking: a process of its own on a CPU, a thread (on a GPU, on a CUDA stream of its
+own) elsewhere (``mapping.concurrent_worker``, :mod:`eslam.slam.mapping.workers`). What
+the run loop and the worker touch is owned by one of them at a time and handed over
+explicitly:
 
 - The tracker reads ``state.field``: the map as of the last *completed* call. The worker
   maps a field of its own (the working field). When a call completes, the run loop's
@@ -21,16 +23,22 @@ two threads touch is owned by one of them at a time and handed over explicitly:
   every keyframe is mapped and the tracker is at most two keyframes ahead of the map.
 
 The map's first keyframe: its TSDF warm start (``mapping.first_warm_start: tsdf``) runs
-before the hand-over and the warm-started map goes to the tracker at once, so tracking
-starts while the first call's rendering steps go on; without a warm start the tracker
-waits for the first call (there is no map to track on before it).
+before the hand-over (its first ``mapping.first_warm_start_lead`` steps only, when that
+is set: the worker runs the others, and the tracker gets the map they leave before the
+rendering steps start) and the warm-started map goes to the tracker at once, so
+tracking starts while the first call's rendering steps go on; without a warm
+start the tracker waits for the first call (there is no map to track on before it).
 
 A call is never cut half way: at the end of the stream, when the run stops
 (:meth:`ConcurrentBackEnd.settle`) and when a frame fails (:meth:`~ConcurrentBackEnd.
 rollback`) the call in flight is waited for, so a checkpoint holds whole calls only (and
-at the end of the stream or a stop, the waiting keyframe mapped too). Calls, their busy
+at the end of the stream or a stop, the waiting keyframe mapped too; in real time the
+stream's last frame takes its place when that frame is not mapped yet). Calls, their busy
 time, replacements and the longest queue are kept in ``components["concurrent_mapping"]``
-and reported in metrics.json (:func:`concurrency_metrics`).
+and reported in metrics.json (:func:`concurrency_metrics`). The worker starts with the
+first call and lasts until the run is over (:meth:`ConcurrentBackEnd.close`, which the
+run loop calls however the run ended), so the last frame's call at the end of the
+stream reuses it.
 """
 
 from __future__ import annotations
@@ -38,8 +46,7 @@ from __future__ import annotations
 import copy
 import dataclasses
 import time
-from collections.abc import Callable
-from concurrent.futures import Future, ThreadPoolExecutor
+from concurrent.futures import Future
 from dataclasses import dataclass
 
 import torch
@@ -48,7 +55,8 @@ from eslam.field.scene_field import SceneField
 from eslam.slam.context import RunContext
 from eslam.slam.mapping.backend import KeyframeBackEnd, MappingJob
 from eslam.slam.mapping.bounds_policy import check_some_depth
-from eslam.slam.mapping.mapper import MappingResult, warm_start_window
+from eslam.slam.mapping.mapper import MappingResult, MappingSchedule, warm_start_window
+from eslam.slam.mapping.workers import MappingCall, Worker, make_worker, worker_kind
 from eslam.slam.state import FrameMark, SLAMState
 from eslam.slam.tracking.frontend import TrackedFrame
 from eslam.types import Frame
@@ -61,45 +69,6 @@ _GRID_KEYS = ("bound", "vertices", "window")
 """Field entries that fix its layout: equal in both fields, the copy can be in place."""
 
 
-class MappingWorker:
-    """One thread that runs mapping calls one at a time; on CUDA, on a stream of its own
-    that first waits for the work the run loop's stream queued before the hand-over.
-
-    Args:
-        device: the run's device.
-    """
-
-    def __init__(self, device: torch.device) -> None:
-        self.executor: ThreadPoolExecutor | None = None  # started with the first call
-        self.stream = torch.cuda.Stream(device) if device.type == "cuda" else None
-
-    def submit(self, call: Callable[[], MappingResult]) -> Future[MappingResult]:
-        """Run ``call`` in the thread; its result (or error) comes back through the future
-        once its device work is done."""
-        ready = None
-        if self.stream is not None:
-            ready = torch.cuda.Event()
-            ready.record()  # the views and poses the run loop's stream built for the call
-        if self.executor is None:
-            self.executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="eslam-mapping")
-        return self.executor.submit(self._run, call, ready)
-
-    def _run(self, call: Callable[[], MappingResult], ready: torch.cuda.Event | None):
-        if self.stream is None:
-            return call()
-        with torch.cuda.stream(self.stream):
-            self.stream.wait_event(ready)
-            result = call()
-        self.stream.synchronize()
-        return result
-
-    def close(self) -> None:
-        """Let the thread end (a call in flight finishes first); again is fine."""
-        if self.executor is not None:
-            self.executor.shutdown(wait=True)
-            self.executor = None
-
-
 @dataclass(frozen=True, eq=False)
 class Flight:
     """A mapping call handed to the worker.
@@ -109,12 +78,34 @@ class Flight:
         future: its result.
         handed_at: the frame being processed when it was handed over.
         started: when (seconds, ``time.perf_counter``).
+        then: the rest of the call, handed over once this part is done and in the
+            tracker's map (the first keyframe's rendering steps, after the warm-start
+            steps the worker runs), or None.
     """
 
     job: MappingJob
     future: Future[MappingResult]
     handed_at: int
     started: float
+    then: MappingSchedule | None = None
+
+
+def split_warm_start(
+    schedule: MappingSchedule, lead: int | None
+) -> tuple[MappingSchedule, MappingSchedule]:
+    """The first call's ``schedule`` (with a warm start) as what runs before the tracker
+    gets the map (its warm start's first ``lead`` steps; None: all) and what the worker
+    runs (the other steps, then the rendering steps)."""
+    warm = schedule.warm_start
+    if warm is None:
+        raise ValueError("split_warm_start needs a schedule with a warm start")
+    steps = warm.steps if lead is None else min(lead, warm.steps)
+    rest = warm.steps - steps
+    before = dataclasses.replace(schedule, warm_start=dataclasses.replace(warm, steps=steps))
+    after = dataclasses.replace(
+        schedule, warm_start=dataclasses.replace(warm, steps=rest) if rest > 0 else None
+    )
+    return before, after
 
 
 def same_layout(a: SceneField, b: SceneField) -> bool:
@@ -150,7 +141,8 @@ class ConcurrentBackEnd(KeyframeBackEnd):
         super().__init__(context)
         if self.loops is not None:
             raise ValueError("concurrent mapping does not close loops")  # the config refuses it
-        self.worker = MappingWorker(context.device)
+        self.worker_kind = worker_kind(context.config.mapping.concurrent_worker, context.device)
+        self.worker: Worker | None = None  # made at the first call, with the mapper then
         self.generator = torch.Generator(device=context.device)
         self.generator.manual_seed(context.config.seed + 1)  # the worker's own draws
         self.working: SceneField | None = None
@@ -192,17 +184,24 @@ class ConcurrentBackEnd(KeyframeBackEnd):
             self.collect(state, wait=True)
             self._hand_over(state)
         if self.waiting is not None:
-            own["replaced"] = own.get("replaced", 0) + 1
-            if own["replaced"] == 1:
-                self.context.logger.warning(
-                    "mapping falls behind: keyframe %d replaced by frame %d while frame %d "
-                    "is mapped (only the newest waiting keyframe is kept)",
-                    self.waiting[1],
-                    index,
-                    -1 if self.flight is None else self.flight.job.index,
-                )
+            self._replace(state, index)
         self.waiting = (frame, index)
         own["queue_max"] = max(own.get("queue_max", 0), 1 + (self.flight is not None))
+
+    def _replace(self, state: SLAMState, index: int) -> None:
+        """The waiting keyframe gives way to frame ``index`` (counted; the first said)."""
+        assert self.waiting is not None
+        own = state.component(COMPONENT)
+        own["replaced"] = own.get("replaced", 0) + 1
+        if own["replaced"] == 1:
+            self.context.logger.warning(
+                "mapping falls behind: keyframe %d replaced by frame %d while frame %d "
+                "is mapped (only the newest waiting keyframe is kept)",
+                self.waiting[1],
+                index,
+                -1 if self.flight is None else self.flight.job.index,
+            )
+        self.waiting = None
 
     def _hand_over(self, state: SLAMState) -> None:
         """Give the waiting keyframe's call to the worker if it is idle."""
@@ -215,27 +214,38 @@ class ConcurrentBackEnd(KeyframeBackEnd):
         working = self.working
         job = self.prepare(frame, index, state, working)
         warmed = job.schedule.warm_start is not None
+        then = None
         if warmed:  # the map's first keyframe: the tracker has the warm-started map at once
-            warm_start_window(
-                working, job.views, job.poses, self.mapping, job.schedule, self.generator
-            )
+            lead, rest = split_warm_start(job.schedule, self.mapping.mapping.first_warm_start_lead)
+            warm_start_window(working, job.views, job.poses, self.mapping, lead, self.generator)
             self._publish(state)
-            job = dataclasses.replace(
-                job, schedule=dataclasses.replace(job.schedule, warm_start=None)
-            )
-        mapper, generator = self.mapper, self.generator
-
-        def call() -> MappingResult:
-            return mapper.map(
-                working, job.views, job.poses, job.optimise, job.schedule, generator=generator
-            )
-
-        future = self.worker.submit(call)
-        self.flight = Flight(job, future, self._frame, time.perf_counter())
+            if rest.warm_start is not None:  # the worker's warm-start steps reach the
+                then = dataclasses.replace(rest, warm_start=None)  # tracker before the
+                rest = dataclasses.replace(rest, iterations=0)  # rendering steps run
+            job = dataclasses.replace(job, schedule=rest)
+        self._submit(job, state, self._frame, time.perf_counter(), then)
         if index == state.next_frame - 1:
             state.last_mapped = True
         if job.first and not warmed:
             self.collect(state, wait=True)  # no warm start: no map to track on before it
+
+    def _submit(
+        self,
+        job: MappingJob,
+        state: SLAMState,
+        handed_at: int,
+        started: float,
+        then: MappingSchedule | None = None,
+    ) -> None:
+        """Hand ``job`` to the worker (made at the first call) on the working field."""
+        assert self.working is not None
+        call = MappingCall(self.working, job.views, job.poses, job.optimise, job.schedule)
+        if self.worker is None:
+            self.worker = make_worker(self.worker_kind, self.mapper, self.context.device)
+            state.component(COMPONENT)["worker"] = self.worker.kind
+            self.context.logger.info("mapping beside the tracker in a %s", self.worker.kind)
+        future = self.worker.submit(call, self.generator)
+        self.flight = Flight(job, future, handed_at, started, then)
 
     def _publish(self, state: SLAMState) -> None:
         """The working field becomes the tracker's map (between frames)."""
@@ -259,6 +269,11 @@ class ConcurrentBackEnd(KeyframeBackEnd):
             raise
         self.flight = None
         self._publish(state)
+        if flight.then is not None:  # the first part is in the tracker's map: the rest
+            rest = dataclasses.replace(flight.job, schedule=flight.then)
+            self._submit(rest, state, flight.handed_at, flight.started)
+            self.collect(state, wait)
+            return
         own = state.component(COMPONENT)
         own["calls"] = own.get("calls", 0) + 1
         own["busy_s"] = own.get("busy_s", 0.0) + time.perf_counter() - flight.started
@@ -273,20 +288,36 @@ class ConcurrentBackEnd(KeyframeBackEnd):
             self.views.forget_from(job.keyframe)
 
     def settle(self, state: SLAMState) -> None:
-        """Wait for the call in flight and map the waiting keyframe (the run stops here);
-        the worker's thread ends (a later call starts another)."""
+        """Wait for the call in flight and map the waiting keyframe (the run stops here).
+        In real time, when the stream's newest frame is not mapped yet, it takes the
+        waiting keyframe's place (:meth:`finish` maps it), as a newer keyframe would."""
+        self.collect(state, wait=True)
+        newest = state.next_frame - 1
+        if self.waiting is not None and self.context.real_time and not state.last_mapped:
+            if self.waiting[1] == newest:
+                self.waiting = None  # finish maps it, as the stream's last frame
+            else:
+                self._replace(state, newest)
+        self._drain(state)
+
+    def _drain(self, state: SLAMState) -> None:
+        """Wait for the call in flight, then map the waiting keyframe."""
         self.collect(state, wait=True)
         if self.waiting is not None:
             self._hand_over(state)
             self.collect(state, wait=True)
-        self.worker.close()
 
     def finish(self, state: SLAMState, last: Frame | None) -> None:
-        self.settle(state)
+        self._drain(state)
         if not state.last_mapped and last is not None:
             self.waiting = (last, state.next_frame - 1)
-            self.settle(state)
+            self._drain(state)
         self._map_last(state, last)  # only a last frame no longer available is left
+
+    def close(self) -> None:
+        """The run is over: the worker ends (a call in flight finishes first)."""
+        if self.worker is not None:
+            self.worker.close()
 
     def rollback(self, state: SLAMState, mark: FrameMark) -> None:
         """Undo the frame begun at ``mark``: the call in flight is waited for and taken in
@@ -314,8 +345,6 @@ class ConcurrentBackEnd(KeyframeBackEnd):
             state.components[COMPONENT] = counts
             if self.views is not None:
                 self.views.forget_from(mark.keyframes)
-            if self.flight is None:
-                self.worker.close()
 
 
 def concurrency_metrics(state: SLAMState, wall_s: float) -> dict:
@@ -330,6 +359,7 @@ def concurrency_metrics(state: SLAMState, wall_s: float) -> dict:
     busy = float(own.get("busy_s", 0.0))
     return {
         "mapping_concurrent": True,
+        "mapping_worker": own.get("worker"),
         "mapping_calls": calls,
         "mapping_calls_per_s": calls / wall_s if wall_s > 0 else 0.0,
         "mapping_busy_share": busy / wall_s if wall_s > 0 else 0.0,
