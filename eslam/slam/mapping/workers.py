@@ -38,8 +38,9 @@ import sys
 import traceback
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
+from multiprocessing.connection import Connection
 from multiprocessing.reduction import ForkingPickler
-from typing import Any, Protocol
+from typing import Protocol
 
 import torch
 import torch.multiprocessing  # its reductions: ForkingPickler sends tensors by shared memory
@@ -216,8 +217,8 @@ class ProcessWorker:
 
     def __init__(self, mapper: Mapper) -> None:
         self.mapper = mapper
-        self.process: Any = None  # a multiprocessing process, started with the first call
-        self.connection: Any = None
+        self.process: subprocess.Popen[bytes] | None = None  # started with the first call
+        self.connection: Connection | None = None
         self.executor: ThreadPoolExecutor | None = None
 
     def _start(self) -> None:
@@ -261,6 +262,7 @@ class ProcessWorker:
 
     def _exchange(self, message: bytes, generator: torch.Generator) -> MappingResult:
         connection, process = self.connection, self.process
+        assert connection is not None and process is not None
         try:
             connection.send_bytes(message)
             while not connection.poll(POLL_S):
@@ -300,7 +302,7 @@ class ProcessWorker:
                 process.wait()
 
 
-def serve(connection: Any) -> None:
+def serve(connection: Connection) -> None:
     """The mapping process (:data:`BOOTSTRAP` set its ``sys.path``): take the run's key
     and thread count, then the mapper, then answer calls until the pipe says stop or
     closes."""
