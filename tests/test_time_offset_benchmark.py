@@ -32,3 +32,19 @@ def test_a_known_offset_is_found() -> None:
     errors = {round(offset, 3): error for offset, error, _ in rows}
     assert errors[0.02] < 0.01 < errors[0.0]
     assert min(errors, key=errors.get) == 0.02
+
+
+def test_a_clock_that_slips_shows_in_its_windows_only() -> None:
+    script = load_script(SCRIPT)
+    truth_times = np.arange(0.0, 20.0, 0.01)
+    frames = np.arange(1.0, 19.0, 1 / 30)
+    late = frames < 10.0  # the first half's frames stamped 30 ms after they were taken
+    estimate = _path(np.where(late, frames - 0.03, frames))
+    rows = script.window_lags(frames, estimate, truth_times, _path(truth_times), 90)
+    lags = np.array([lag for _, _, lag, _ in rows])
+    firsts = np.array([first for first, _, _, _ in rows])
+    first_half = firsts + 90 <= int(late.sum())
+    second_half = firsts >= int(late.sum())
+    assert np.all(np.abs(lags[first_half] - 0.03) < 0.006)
+    assert np.all(np.abs(lags[second_half]) < 0.006)
+    assert sum(count for _, count, _, _ in rows) == len(frames)
