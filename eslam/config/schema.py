@@ -608,6 +608,11 @@ class MappingConfig:
     """Rays per step in total over the window, split evenly (Replica 4000, TUM 5000)."""
     iterations: int = 15
     """Optimisation steps per mapped frame (Replica 15, ScanNet 30, TUM 60)."""
+    realtime_iterations: int | None = None
+    """Steps per mapped frame (after the first) when frames arrive in real time (a live
+    camera, ``--realtime``): while a call runs the camera moves on, so fewer steps a
+    call map more of its views (docs/live.md). null = ``iterations``; recorded data
+    always takes ``iterations``."""
     first_iterations: int = 1000
     """Steps on the first frame (release: 1000)."""
     first_lr_factor: float = 5.0
@@ -665,6 +670,8 @@ class MappingConfig:
         _at_least(self, "window", 3)
         _at_least(self, "rays", 1)
         _at_least(self, "iterations", 0)
+        if self.realtime_iterations is not None:
+            _at_least(self, "realtime_iterations", 0)
         _at_least(self, "first_iterations", 0)
         _at_least(self, "first_warm_start_steps", 0)
         _at_least(self, "first_warm_start_points", 1)

@@ -24,7 +24,7 @@ from eslam.slam.mapping.concurrent_mapping import (
     same_layout,
     split_warm_start,
 )
-from eslam.slam.mapping.mapper import MappingResult, MappingSchedule
+from eslam.slam.mapping.mapper import MappingResult, MappingSchedule, mapping_schedule
 from eslam.slam.mapping.warm_start import WarmStart
 from eslam.slam.mapping.workers import ProcessWorker
 from eslam.slam.run.observers import FrameDone, RunObserverBase
@@ -279,6 +279,7 @@ def test_a_warm_start_lead_gives_the_tracker_the_worker_s_steps_before_rendering
         "mapping.first_warm_start_steps=40",
         "mapping.first_warm_start_points=500",
         "mapping.first_warm_start_lead=10",
+        "mapping.realtime_iterations=1",  # a recording: not real time, so not taken
         "output.mesh=false",
     )
     result = run_slam(config, tmp_path / "run", components=Components(back_end=back_end))
@@ -291,6 +292,44 @@ def test_a_warm_start_lead_gives_the_tracker_the_worker_s_steps_before_rendering
     assert (
         result.metrics["mapping_calls"] == len(calls) - 1 == keyframes_of(tmp_path / "run", config)
     )
+
+
+@pytest.mark.slow
+def test_a_real_time_run_maps_with_its_own_step_count(tiny_sequence: Path, tmp_path: Path) -> None:
+    built: list[ConcurrentBackEnd] = []
+
+    def back_end(context) -> ConcurrentBackEnd:
+        built.append(ConcurrentBackEnd(context))
+        built[0].mapper = RecordingMapper(built[0].mapper)
+        return built[0]
+
+    config = tiny_config(
+        tiny_sequence,
+        *QUICK,  # mapping.iterations=3
+        "data.realtime=true",
+        "data.replay_fps=200",
+        "mapping.concurrent_worker=thread",  # the recording mapper runs in this process
+        "mapping.realtime_iterations=1",
+        "output.mesh=false",
+    )
+    result = run_slam(config, tmp_path / "rt", components=Components(back_end=back_end))
+    calls = built[0].mapper.calls
+    assert calls[0] == (0, config.mapping.first_iterations), calls  # the first keeps its own
+    assert len(calls) >= 2 and all(call == (0, 1) for call in calls[1:]), calls
+    assert result.metrics["mapping_calls"] == len(calls)
+
+
+def test_the_real_time_step_count_is_taken_in_real_time_only() -> None:
+    config = load_config(DEMO_CONFIG, ["mapping.iterations=15", "mapping.realtime_iterations=8"])
+    assert mapping_schedule(config.mapping, first=False, real_time=True).iterations == 8
+    assert mapping_schedule(config.mapping, first=False, real_time=False).iterations == 15
+    first = mapping_schedule(config.mapping, first=True, real_time=True)
+    assert first.iterations == config.mapping.first_iterations
+    unset = load_config(DEMO_CONFIG, ["mapping.realtime_iterations=null"]).mapping
+    assert unset.realtime_iterations is None and unset.iterations == 15
+    assert mapping_schedule(unset, first=False, real_time=True).iterations == 15
+    with pytest.raises(ConfigError, match="realtime_iterations"):
+        load_config(DEMO_CONFIG, ["mapping.realtime_iterations=-1"])
 
 
 def test_a_warm_start_lead_splits_the_steps_between_the_first_pose_and_the_worker() -> None:

@@ -276,7 +276,7 @@ class KeyframeBackEnd:
             views=self._views(state).views(window),
             poses=store.poses[window].to(self.context.device),
             optimise=[config.mapping.optimise_poses and k != oldest for k in window],
-            schedule=mapping_schedule(config.mapping, first=first),
+            schedule=mapping_schedule(config.mapping, first, self.context.real_time),
             first=first,
         )
 

@@ -89,13 +89,16 @@ class MappingSchedule:
         return self.lr_decay + (1.0 - self.lr_decay) * 0.5 * (1.0 + math.cos(math.pi * t))
 
 
-def mapping_schedule(config: MappingConfig, first: bool) -> MappingSchedule:
+def mapping_schedule(
+    config: MappingConfig, first: bool, real_time: bool = False
+) -> MappingSchedule:
     """The schedule of a mapping call.
 
     The first call (the map is empty) runs ``first_iterations`` at ``first_lr_factor``
     times the learning rates (release: 1000 at 5x, constant), with ``first_rays`` rays
     and the rates decaying to ``first_lr_decay`` of their start, after the TSDF warm start
-    when ``first_warm_start`` is tsdf; later calls run ``iterations`` at 1x with ``rays``.
+    when ``first_warm_start`` is tsdf; later calls run ``iterations`` at 1x with ``rays``
+    (``realtime_iterations``, when set, while frames arrive in ``real_time``).
     """
     if first:
         warm = (
@@ -110,7 +113,10 @@ def mapping_schedule(config: MappingConfig, first: bool) -> MappingSchedule:
             lr_decay=config.first_lr_decay,
             warm_start=warm,
         )
-    return MappingSchedule(iterations=config.iterations, lr_factor=1.0, rays=config.rays)
+    iterations = config.iterations
+    if real_time and config.realtime_iterations is not None:
+        iterations = config.realtime_iterations
+    return MappingSchedule(iterations=iterations, lr_factor=1.0, rays=config.rays)
 
 
 @dataclass(frozen=True, eq=False)
