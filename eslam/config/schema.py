@@ -613,6 +613,11 @@ class MappingConfig:
     camera, ``--realtime``): while a call runs the camera moves on, so fewer steps a
     call map more of its views (docs/live.md). null = ``iterations``; recorded data
     always takes ``iterations``."""
+    realtime_first_iterations: int | None = None
+    """The first call's rendering steps (after its warm start) when frames arrive in real
+    time: beside the tracker, frames are tracked on the warm-started map while these
+    run, and the map they make replaces it under the track (docs/live.md). null =
+    ``first_iterations``; recorded data always takes ``first_iterations``."""
     first_iterations: int = 1000
     """Steps on the first frame (release: 1000)."""
     first_lr_factor: float = 5.0
@@ -670,8 +675,9 @@ class MappingConfig:
         _at_least(self, "window", 3)
         _at_least(self, "rays", 1)
         _at_least(self, "iterations", 0)
-        if self.realtime_iterations is not None:
-            _at_least(self, "realtime_iterations", 0)
+        for name in ("realtime_iterations", "realtime_first_iterations"):
+            if getattr(self, name) is not None:
+                _at_least(self, name, 0)
         _at_least(self, "first_iterations", 0)
         _at_least(self, "first_warm_start_steps", 0)
         _at_least(self, "first_warm_start_points", 1)

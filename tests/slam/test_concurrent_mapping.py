@@ -279,7 +279,8 @@ def test_a_warm_start_lead_gives_the_tracker_the_worker_s_steps_before_rendering
         "mapping.first_warm_start_steps=40",
         "mapping.first_warm_start_points=500",
         "mapping.first_warm_start_lead=10",
-        "mapping.realtime_iterations=1",  # a recording: not real time, so not taken
+        "mapping.realtime_iterations=1",  # a recording: not real time, so neither is taken
+        "mapping.realtime_first_iterations=1",
         "output.mesh=false",
     )
     result = run_slam(config, tmp_path / "run", components=Components(back_end=back_end))
@@ -310,26 +311,35 @@ def test_a_real_time_run_maps_with_its_own_step_count(tiny_sequence: Path, tmp_p
         "data.replay_fps=200",
         "mapping.concurrent_worker=thread",  # the recording mapper runs in this process
         "mapping.realtime_iterations=1",
+        "mapping.realtime_first_iterations=2",  # QUICK's first_iterations: 5
         "output.mesh=false",
     )
     result = run_slam(config, tmp_path / "rt", components=Components(back_end=back_end))
     calls = built[0].mapper.calls
-    assert calls[0] == (0, config.mapping.first_iterations), calls  # the first keeps its own
+    assert calls[0] == (0, 2), calls
     assert len(calls) >= 2 and all(call == (0, 1) for call in calls[1:]), calls
     assert result.metrics["mapping_calls"] == len(calls)
 
 
-def test_the_real_time_step_count_is_taken_in_real_time_only() -> None:
-    config = load_config(DEMO_CONFIG, ["mapping.iterations=15", "mapping.realtime_iterations=8"])
+def test_the_real_time_step_counts_are_taken_in_real_time_only() -> None:
+    settings = ["mapping.iterations=15", "mapping.first_iterations=30"]
+    config = load_config(
+        DEMO_CONFIG,
+        [*settings, "mapping.realtime_iterations=8", "mapping.realtime_first_iterations=10"],
+    )
     assert mapping_schedule(config.mapping, first=False, real_time=True).iterations == 8
     assert mapping_schedule(config.mapping, first=False, real_time=False).iterations == 15
-    first = mapping_schedule(config.mapping, first=True, real_time=True)
-    assert first.iterations == config.mapping.first_iterations
-    unset = load_config(DEMO_CONFIG, ["mapping.realtime_iterations=null"]).mapping
-    assert unset.realtime_iterations is None and unset.iterations == 15
+    assert mapping_schedule(config.mapping, first=True, real_time=True).iterations == 10
+    assert mapping_schedule(config.mapping, first=True, real_time=False).iterations == 30
+    unset = load_config(
+        DEMO_CONFIG,
+        [*settings, "mapping.realtime_iterations=null", "mapping.realtime_first_iterations=null"],
+    ).mapping
     assert mapping_schedule(unset, first=False, real_time=True).iterations == 15
-    with pytest.raises(ConfigError, match="realtime_iterations"):
-        load_config(DEMO_CONFIG, ["mapping.realtime_iterations=-1"])
+    assert mapping_schedule(unset, first=True, real_time=True).iterations == 30
+    for name in ("realtime_iterations", "realtime_first_iterations"):
+        with pytest.raises(ConfigError, match=name):
+            load_config(DEMO_CONFIG, [f"mapping.{name}=-1"])
 
 
 def test_a_warm_start_lead_splits_the_steps_between_the_first_pose_and_the_worker() -> None:

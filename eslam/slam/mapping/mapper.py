@@ -97,8 +97,9 @@ def mapping_schedule(
     The first call (the map is empty) runs ``first_iterations`` at ``first_lr_factor``
     times the learning rates (release: 1000 at 5x, constant), with ``first_rays`` rays
     and the rates decaying to ``first_lr_decay`` of their start, after the TSDF warm start
-    when ``first_warm_start`` is tsdf; later calls run ``iterations`` at 1x with ``rays``
-    (``realtime_iterations``, when set, while frames arrive in ``real_time``).
+    when ``first_warm_start`` is tsdf; later calls run ``iterations`` at 1x with ``rays``.
+    While frames arrive in ``real_time``, ``realtime_first_iterations`` and
+    ``realtime_iterations`` replace the two step counts when set.
     """
     if first:
         warm = (
@@ -106,8 +107,11 @@ def mapping_schedule(
             if config.first_warm_start == "tsdf"
             else None
         )
+        first_iterations = config.first_iterations
+        if real_time and config.realtime_first_iterations is not None:
+            first_iterations = config.realtime_first_iterations
         return MappingSchedule(
-            iterations=config.first_iterations,
+            iterations=first_iterations,
             lr_factor=config.first_lr_factor,
             rays=config.first_rays or config.rays,
             lr_decay=config.first_lr_decay,
