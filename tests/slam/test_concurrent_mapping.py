@@ -260,17 +260,28 @@ class RecordingMapper:
         return self.mapper.map(field, views, poses, optimise, schedule, generator)
 
 
+class RecordingBackEnd:
+    """Builds the run's concurrent back end with a :class:`RecordingMapper` (use a thread
+    worker: the calls are recorded in this process)."""
+
+    def __init__(self) -> None:
+        self.built: ConcurrentBackEnd | None = None
+
+    def __call__(self, context) -> ConcurrentBackEnd:
+        self.built = ConcurrentBackEnd(context)
+        self.built.mapper = RecordingMapper(self.built.mapper)
+        return self.built
+
+    def calls(self) -> list[tuple[int, int]]:
+        assert self.built is not None
+        return self.built.mapper.calls
+
+
 @pytest.mark.slow
 def test_a_warm_start_lead_gives_the_tracker_the_worker_s_steps_before_rendering(
     tiny_sequence: Path, tmp_path: Path
 ) -> None:
-    built: list[ConcurrentBackEnd] = []
-
-    def back_end(context) -> ConcurrentBackEnd:
-        built.append(ConcurrentBackEnd(context))
-        built[0].mapper = RecordingMapper(built[0].mapper)
-        return built[0]
-
+    recording = RecordingBackEnd()
     config = tiny_config(
         tiny_sequence,
         *CONCURRENT,
@@ -283,8 +294,8 @@ def test_a_warm_start_lead_gives_the_tracker_the_worker_s_steps_before_rendering
         "mapping.realtime_first_iterations=1",
         "output.mesh=false",
     )
-    result = run_slam(config, tmp_path / "run", components=Components(back_end=back_end))
-    calls = built[0].mapper.calls
+    result = run_slam(config, tmp_path / "run", components=Components(back_end=recording))
+    calls = recording.calls()
     first_iterations = config.mapping.first_iterations
     # the first keyframe: 10 steps before the first pose, then the worker's 30 on their
     # own (published to the tracker), then its rendering steps; one call counted
@@ -297,13 +308,7 @@ def test_a_warm_start_lead_gives_the_tracker_the_worker_s_steps_before_rendering
 
 @pytest.mark.slow
 def test_a_real_time_run_maps_with_its_own_step_count(tiny_sequence: Path, tmp_path: Path) -> None:
-    built: list[ConcurrentBackEnd] = []
-
-    def back_end(context) -> ConcurrentBackEnd:
-        built.append(ConcurrentBackEnd(context))
-        built[0].mapper = RecordingMapper(built[0].mapper)
-        return built[0]
-
+    recording = RecordingBackEnd()
     config = tiny_config(
         tiny_sequence,
         *QUICK,  # mapping.iterations=3
@@ -314,8 +319,8 @@ def test_a_real_time_run_maps_with_its_own_step_count(tiny_sequence: Path, tmp_p
         "mapping.realtime_first_iterations=2",  # QUICK's first_iterations: 5
         "output.mesh=false",
     )
-    result = run_slam(config, tmp_path / "rt", components=Components(back_end=back_end))
-    calls = built[0].mapper.calls
+    result = run_slam(config, tmp_path / "rt", components=Components(back_end=recording))
+    calls = recording.calls()
     assert calls[0] == (0, 2), calls
     assert len(calls) >= 2 and all(call == (0, 1) for call in calls[1:]), calls
     assert result.metrics["mapping_calls"] == len(calls)
