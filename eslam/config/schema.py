@@ -433,6 +433,24 @@ class RecoveryConfig:
 
 
 @dataclass
+class FeaturesConfig:
+    """ORB features of frames and keyframes: the starting pose (``tracking.start:
+    features``), relocalisation and loop candidates by appearance (docs/tracking.md,
+    "Starting pose")."""
+
+    count: int = 3000
+    """Features kept per image at most (the strongest corners first)."""
+    fast_threshold: int = 7
+    """The FAST corner test's contrast in grey levels (OpenCV's default 20): a frame
+    blurred by a fast turn has few corners above 20 and then matches nothing."""
+
+    def __post_init__(self) -> None:
+        _at_least(self, "count", 1)
+        if not 1 <= self.fast_threshold <= 255:
+            raise ValueError(f"fast_threshold must be in [1, 255], got {self.fast_threshold}")
+
+
+@dataclass
 class TrackingConfig:
     """Camera tracking, once per frame (docs/method.md section 4)."""
 
@@ -453,6 +471,8 @@ class TrackingConfig:
     time) and jerks stay within the tracker's reach (docs/tracking.md, "Starting pose")."""
     start_min_matches: int = 20
     """Feature matches that must agree on the starting pose (RANSAC inliers within 3 cm)."""
+    features: FeaturesConfig = field(default_factory=FeaturesConfig)
+    """The ORB features the starting pose, relocalisation and loop closure match."""
     observed_only: bool = False
     """Track on observed space only: a pixel whose depth point, at the motion model's
     guess, no keyframe observed (outside every keyframe's view, or further than the

@@ -94,7 +94,7 @@ class LoopCloser:
             own["seconds"] = own.get("seconds", 0.0) + time.perf_counter() - started
             return
         if self.places is None or self.places.store is not store:
-            self.places = PlaceIndex(store)
+            self.places = PlaceIndex(store, self.context.config.tracking.features)
         generator = torch.Generator().manual_seed(index)
         candidates = by_pose(store, current, eligible, self.config, generator)
         taken = {c.keyframe for c in candidates}

@@ -10,6 +10,8 @@ features with their depth, matching, and a camera pose from matches.
   ranks keyframes, it does not decide: the matches and the map do.
 - Local features are ORB (Rublee et al., ICCV 2011; ``cv2.ORB_create``), matched by
   Hamming distance with Lowe's ratio test (IJCV 2004) and kept where both ways agree.
+  How many, and how faint a corner may be (``tracking.features``), decide whether a
+  blurred frame (a fast turn) keeps enough of them to match.
 - A pose from matches: the keyframe's features with depth give world points, the
   frame's features with its own depth camera points; a rigid motion fitted in RANSAC
   (:func:`rigid_pose`) carries one onto the other. Camera axes are OpenCV's, as
@@ -25,6 +27,7 @@ from typing import Any
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from eslam.config.schema import FeaturesConfig
 from eslam.types import Intrinsics
 
 THUMBNAIL = (40, 30)
@@ -91,12 +94,17 @@ class Features:
 
 
 def orb_features(
-    rgb: np.ndarray, depth: np.ndarray, intrinsics: Intrinsics, count: int = 1000
+    rgb: np.ndarray,
+    depth: np.ndarray,
+    intrinsics: Intrinsics,
+    settings: FeaturesConfig | None = None,
 ) -> Features:
-    """Up to ``count`` ORB features of an (H, W, 3) uint8 image with its (H, W) depth
-    in metres (0 = missing), back-projected with ``intrinsics``."""
+    """The ORB features (``settings``, default ``tracking.features``'s defaults) of an
+    (H, W, 3) uint8 image with its (H, W) depth in metres (0 = missing), back-projected
+    with ``intrinsics``."""
     cv2 = opencv()
-    orb = cv2.ORB_create(nfeatures=count)
+    settings = FeaturesConfig() if settings is None else settings
+    orb = cv2.ORB_create(nfeatures=settings.count, fastThreshold=settings.fast_threshold)
     keypoints, descriptors = orb.detectAndCompute(grey(rgb), None)
     if descriptors is None or not keypoints:
         empty = np.zeros((0, 2), np.float32)

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from eslam.config.schema import FeaturesConfig
 from eslam.slam.mapping.keyframes import KeyframeStore
 from eslam.slam.places.features import (
     Features,
@@ -35,10 +36,12 @@ class Place:
     features: Features
 
 
-def describe(rgb: np.ndarray, depth: np.ndarray, store: KeyframeStore) -> Place:
+def describe(
+    rgb: np.ndarray, depth: np.ndarray, store: KeyframeStore, orb: FeaturesConfig
+) -> Place:
     """An (H, W, 3) uint8 image with its (H, W) depth in metres as a :class:`Place`
-    (the store's camera)."""
-    return Place(thumbnail(rgb), orb_features(rgb, depth, store.intrinsics))
+    (the store's camera; ORB features as ``orb`` sets)."""
+    return Place(thumbnail(rgb), orb_features(rgb, depth, store.intrinsics, orb))
 
 
 @dataclass(frozen=True)
@@ -61,10 +64,12 @@ class PlaceIndex:
 
     Args:
         store: the run's keyframe store (its images and, through the trajectory, poses).
+        orb: the ORB detector's settings, for keyframes and queries alike.
     """
 
-    def __init__(self, store: KeyframeStore) -> None:
+    def __init__(self, store: KeyframeStore, orb: FeaturesConfig) -> None:
         self.store = store
+        self.orb = orb
         self._places: list[tuple[int, Place]] = []  # (frame index, place) by keyframe id
 
     def places(self) -> list[Place]:
@@ -79,7 +84,7 @@ class PlaceIndex:
         for j in range(kept, len(frames)):
             rgb = (self.store.rgb(j, "cpu") * 255.0).round().to(torch.uint8).numpy()
             depth = self.store.depth(j, "cpu").numpy()
-            self._places.append((frames[j], describe(rgb, depth, self.store)))
+            self._places.append((frames[j], describe(rgb, depth, self.store, self.orb)))
         return [place for _, place in self._places]
 
     def alike(self, query: Place, count: int) -> list[tuple[int, float]]:
@@ -126,13 +131,18 @@ def pose_from_matches(
 class Places:
     """The run's :class:`PlaceIndex`, shared by whoever asks about places (the tracking
     front end's feature start and its recovery): made again when the run's keyframe
-    store is another object (a resumed run, a test that swaps the state)."""
+    store is another object (a resumed run, a test that swaps the state).
 
-    def __init__(self) -> None:
+    Args:
+        orb: the ORB detector's settings (``tracking.features``).
+    """
+
+    def __init__(self, orb: FeaturesConfig) -> None:
+        self.orb = orb
         self._index: PlaceIndex | None = None
 
     def of(self, store: KeyframeStore) -> PlaceIndex:
         """The index of ``store``'s keyframes."""
         if self._index is None or self._index.store is not store:
-            self._index = PlaceIndex(store)
+            self._index = PlaceIndex(store, self.orb)
         return self._index

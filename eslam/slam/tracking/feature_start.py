@@ -78,7 +78,7 @@ class FeatureStart:
 
     def describe(self, frame: Frame, state: SLAMState) -> Place:
         """``frame`` as a place (global descriptor and ORB features with depth)."""
-        return describe(frame.rgb, frame.depth, state.keyframes)
+        return describe(frame.rgb, frame.depth, state.keyframes, self.places.orb)
 
     def start(self, query: Place, state: SLAMState) -> FeatureStartResult | None:
         """The next frame's pose from its features ``query`` matched to the previous

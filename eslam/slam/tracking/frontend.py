@@ -109,7 +109,7 @@ class TrackingFrontEnd:
         self.tracker = make_tracker(context.config) if tracker is None else tracker
         self.filters = make_filters(context) if filters is None else list(filters)
         settings = context.config.tracking
-        places = Places()
+        places = Places(settings.features)
         if recovery is None and settings.recovery.enabled:
             recovery = Recovery(context, self.tracker, places)
         self.recovery = recovery

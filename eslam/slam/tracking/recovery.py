@@ -77,7 +77,7 @@ class Recovery:
         self.context = context
         self.settings: RecoveryConfig = context.config.tracking.recovery
         self.tracker = tracker
-        self.places = Places() if places is None else places
+        self.places = Places(context.config.tracking.features) if places is None else places
 
     def recover(
         self,
@@ -157,7 +157,7 @@ class Recovery:
         (each refused candidate is logged)."""
         store = state.keyframes
         places = self.places.of(store)
-        query = describe(frame.rgb, frame.depth, store) if place is None else place
+        query = describe(frame.rgb, frame.depth, store, places.orb) if place is None else place
         best = None
         for k, similarity in places.alike(query, self.settings.candidates):
             match = places.locate(query, k, self.settings.min_matches, seed=state.next_frame)
