@@ -163,6 +163,25 @@ def rigid_fit(camera: np.ndarray, world: np.ndarray) -> np.ndarray:
     return pose
 
 
+def rigid_fits(camera: np.ndarray, world: np.ndarray) -> np.ndarray:
+    """(S, 4, 4) :func:`rigid_fit` of each of S point sets, (S, N, 3) ``camera`` and
+    ``world`` points, at once: the Kabsch solution (Kabsch, Acta Cryst. A 1976; Arun et
+    al. 1987) R = V diag(1, 1, d) U^T from the SVD U S V^T of the centred points'
+    covariance H = sum q_i p_i^T, d = sign det(V U^T) so that R is a rotation, not a
+    reflection; t = mean(p) - R mean(q). Equal to :func:`rigid_fit` wherever the
+    points are not collinear (there R is not defined by them)."""
+    q_mean, p_mean = camera.mean(axis=1), world.mean(axis=1)
+    covariance = np.einsum("sni,snj->sij", camera - q_mean[:, None], world - p_mean[:, None])
+    u, _, vt = np.linalg.svd(covariance)
+    flip = np.ones((len(camera), 3))
+    flip[:, 2] = np.sign(np.linalg.det(np.einsum("sji,skj->sik", vt, u)))
+    rotation = np.einsum("sji,sj,skj->sik", vt, flip, u)
+    poses = np.tile(np.eye(4), (len(camera), 1, 1))
+    poses[:, :3, :3] = rotation
+    poses[:, :3, 3] = p_mean - np.einsum("sij,sj->si", rotation, q_mean)
+    return poses
+
+
 def rigid_pose(
     camera: np.ndarray,
     world: np.ndarray,
@@ -175,7 +194,9 @@ def rigid_pose(
     matched features with its depth) onto their matches' (N, 3) ``world`` points: RANSAC
     (Fischler and Bolles 1981) over fits of 3 matches (:func:`rigid_fit`; samples drawn
     with ``seed``), an inlier being within ``threshold_m``, then refitted on the best
-    sample's inliers; None with fewer than ``min_inliers`` inliers.
+    sample's inliers; None with fewer than ``min_inliers`` inliers. The samples are
+    fitted and scored at once (:func:`rigid_fits`), as a loop over them with
+    :func:`rigid_fit` would (``tests/slam/test_recovery.py`` holds the two equal).
 
     With depth on both sides this is better posed than a perspective-n-point pose from
     pixels, which on a few dozen features of a room's planes often flips."""
@@ -183,15 +204,15 @@ def rigid_pose(
     if count < max(min_inliers, 3):
         return None
     generator = np.random.default_rng(seed)
-    best = np.zeros(count, dtype=bool)
-    for _ in range(iterations):
-        sample = generator.choice(count, size=3, replace=False)
-        if np.linalg.matrix_rank(world[sample] - world[sample].mean(axis=0), tol=1e-3) < 2:
-            continue  # collinear: no rotation about their line
-        pose = rigid_fit(camera[sample], world[sample])
-        inliers = residuals(pose, camera, world) < threshold_m
-        if inliers.sum() > best.sum():
-            best = inliers
+    samples = np.stack([generator.choice(count, size=3, replace=False) for _ in range(iterations)])
+    spread = np.linalg.svd(world[samples] - world[samples].mean(axis=1, keepdims=True))[1]
+    samples = samples[(spread > 1e-3).sum(axis=1) >= 2]  # collinear: no rotation about their line
+    if len(samples) == 0:
+        return None
+    poses = rigid_fits(camera[samples], world[samples])
+    offsets = camera @ poses[:, :3, :3].transpose(0, 2, 1) + poses[:, None, :3, 3] - world
+    agree = np.einsum("sni,sni->sn", offsets, offsets) < threshold_m**2  # (samples, N)
+    best = agree[int(np.argmax(agree.sum(axis=1)))]  # the first sample with the most
     if best.sum() < max(min_inliers, 3):
         return None
     pose = rigid_fit(camera[best], world[best])
