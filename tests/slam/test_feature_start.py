@@ -138,6 +138,31 @@ def test_a_reversing_camera_is_tracked_from_features(reversal: Path, tmp_path: P
     np.testing.assert_allclose(resumed.poses, result.poses, rtol=0, atol=1e-7)
 
 
+@pytest.mark.slow
+def test_frames_the_map_cannot_confirm_are_carried_by_their_features(tmp_path: Path) -> None:
+    """Every frame after the first fails the tracker's test (an inlier share of 0.9999 is
+    out of reach), so none is confirmed by the map and none becomes a keyframe: each
+    keeps its start from features, and the next frame is matched to it (visual
+    odometry), not to frame 0, which the camera turns away from (2 degrees a frame). A
+    run that matched only frame 0 loses the features half-way and holds still."""
+    room = dataclasses.replace(ROOM, frames=24)
+    data = write_edited_sequence(tmp_path / "room", room, SequenceEdit(tuple(range(24))))
+    config = demo_config(
+        data,
+        "tracking.method=sdf",
+        "tracking.start=features",
+        "tracking.sdf.min_inlier_fraction=0.9999",
+    )
+    result = run_slam(config, tmp_path / "run")
+    metrics = result.metrics
+    assert metrics["tracking_failures"] == 23
+    assert metrics["tracking_starts"] == {"previous_frame": 23, "keyframe": 0, "motion_model": 0}
+    estimate = np.loadtxt(tmp_path / "run" / "trajectory.txt")[:, 1:4]
+    truth = np.loadtxt(tmp_path / "run" / "trajectory_gt.txt")[:, 1:4]
+    errors = np.linalg.norm(estimate - truth, axis=1)
+    assert errors.max() < 0.05 < np.linalg.norm(truth - truth[0], axis=1).max() / 5
+
+
 @pytest.mark.parametrize(
     ("override", "message"),
     [

@@ -48,7 +48,7 @@ class FrameLogObserver(RunObserverBase):
             assert quality is not None
             self.log.warning(
                 "frame %d (timestamp %.6f): tracking failed (%.0f%% inliers, residual %.1f mm):"
-                " the motion model's pose is kept and the frame is no keyframe",
+                " its starting pose is kept and the frame is no keyframe",
                 frame.index,
                 timestamp,
                 100.0 * quality.inlier_fraction,

@@ -8,8 +8,10 @@ frames) or through a jerk, the guess is often 5-12 cm and 3-13 degrees off
 (docs/tracking.md, "Starting pose"), and the tracker settles on a wrong pose or fails.
 
 With ``start: features`` each frame's ORB features are matched to a reference image
-whose pose the run has: the previous frame when it was tracked (not failed), else the
-latest keyframe (:class:`~eslam.slam.places.index.PlaceIndex`, shared with the
+whose pose the run has: the previous frame when it was tracked, or when it failed but
+its own start came from features (it keeps that pose: the features carry the camera
+from frame to frame while the map cannot confirm it, instead of holding it still),
+else the latest keyframe (:class:`~eslam.slam.places.index.PlaceIndex`, shared with the
 recovery's relocalisation; also when the previous frame gives no pose). A rigid motion
 fitted in RANSAC to the matched features' depth points
 (:func:`~eslam.slam.places.index.pose_from_matches`; the reference's points placed
@@ -119,8 +121,8 @@ class FeatureStart:
         return FeatureStartResult(torch.from_numpy(match.pose), frames[latest], match.inliers)
 
     def remember(self, query: Place, state: SLAMState) -> None:
-        """Keep ``query``, the features of the frame just tracked (not failed), as the
-        next frame's reference (in ``state.components``)."""
+        """Keep ``query``, the features of the frame just tracked (or failed with its
+        pose from features), as the next frame's reference (in ``state.components``)."""
         features = query.features
         state.component(COMPONENT).update(
             frame=state.next_frame,

@@ -131,12 +131,12 @@ class TrackingFrontEnd:
         guess = self.guess(state)
         if not has_depth or state.field is None or len(state.keyframes) == 0:
             return TrackedFrame(guess, has_depth)
-        query = None
+        query = started = None
         if self.feature_start is not None:
             query = self.feature_start.describe(frame, state)
-            found = self.feature_start.start(query, state)
-            if found is not None:
-                guess = found.pose.to(guess)
+            started = self.feature_start.start(query, state)
+            if started is not None:
+                guess = started.pose.to(guess)
         whole = view = self.view(frame)
         kept: dict[str, float] = {}
         for view_filter in self.filters:
@@ -159,7 +159,9 @@ class TrackingFrontEnd:
                 if found is not None:
                     pose, quality = found.pose, found.quality
         if self.feature_start is not None and query is not None:
-            if quality is None or not quality.failed:
+            # a failed frame keeps its features' pose: the next frame starts from it
+            # (visual odometry while the map cannot confirm), not from an older keyframe
+            if quality is None or not quality.failed or started is not None:
                 self.feature_start.remember(query, state)
         return TrackedFrame(pose, has_depth, True, quality, kept=kept)
 
