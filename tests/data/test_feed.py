@@ -159,7 +159,10 @@ def test_a_replayed_recording_reads_only_the_frames_the_loop_takes() -> None:
     assert counts.received == 50 and counts.replaced == 50 - len(got) > 0
     # what a camera gives: a dropped frame was never read (decoded), a taken one once
     assert sequence.reads == [index for index, _ in got]
-    assert got[-1][0] == 59 and got[0][0] == 10
+    # the newest frame is kept: the last always; the first is frame 10 (start=10) unless
+    # the reader ran ahead of the loop's first take by a millisecond or more (a loaded
+    # machine), when a later one replaced it
+    assert got[-1][0] == 59 and 10 <= got[0][0] < 20
     assert [stamp for _, stamp in got] == [5.0 + index / 1000.0 for index, _ in got]
     assert [index - 10 for index, _ in got] == feed.stream.source_indices
 
