@@ -420,6 +420,12 @@ class RecoveryConfig:
     min_matches: int = 20
     """Feature matches that must agree on one pose (RANSAC inliers within 3 cm) before a
     candidate's pose is tried; with fewer, the candidate keyframe's own pose is tried."""
+    carried: bool | None = None
+    """Whether a failed frame whose start came from its features (``tracking.start:
+    features``; such a frame keeps that pose) goes through the tries too. null: not in
+    real time (a live camera, ``--realtime``), where frames are dropped while the tries
+    run (over a second a frame on a CPU), yes on recorded data (docs/tracking.md,
+    "Recovery")."""
 
     def __post_init__(self) -> None:
         if not 0 <= self.min_inlier_fraction <= 1:

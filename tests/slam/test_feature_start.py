@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 from pathlib import Path
+from types import SimpleNamespace
 
 import cv2
 import numpy as np
@@ -25,6 +26,7 @@ from eslam.geometry.pose import pose_distance
 from eslam.slam.places.features import orb_features
 from eslam.slam.places.index import pose_from_matches
 from eslam.slam.session import run_slam
+from eslam.slam.tracking.recovery import Recovery
 from eslam.synthetic import SynthConfig, SyntheticSequence
 from eslam.synthetic.edits import SequenceEdit, reversal, write_edited_sequence
 from tests.conftest import demo_config
@@ -139,12 +141,17 @@ def test_a_reversing_camera_is_tracked_from_features(reversal: Path, tmp_path: P
 
 
 @pytest.mark.slow
-def test_frames_the_map_cannot_confirm_are_carried_by_their_features(tmp_path: Path) -> None:
+@pytest.mark.parametrize("carried", ["true", "false"])
+def test_frames_the_map_cannot_confirm_are_carried_by_their_features(
+    tmp_path: Path, carried: str
+) -> None:
     """Every frame after the first fails the tracker's test (an inlier share of 0.9999 is
     out of reach), so none is confirmed by the map and none becomes a keyframe: each
     keeps its start from features, and the next frame is matched to it (visual
     odometry), not to frame 0, which the camera turns away from (2 degrees a frame). A
-    run that matched only frame 0 loses the features half-way and holds still."""
+    run that matched only frame 0 loses the features half-way and holds still. The
+    recovery's tries run for those frames only with ``tracking.recovery.carried`` (its
+    relocalisations are refused, as every try fails here): the same poses either way."""
     room = dataclasses.replace(ROOM, frames=24)
     data = write_edited_sequence(tmp_path / "room", room, SequenceEdit(tuple(range(24))))
     config = demo_config(
@@ -152,6 +159,7 @@ def test_frames_the_map_cannot_confirm_are_carried_by_their_features(tmp_path: P
         "tracking.method=sdf",
         "tracking.start=features",
         "tracking.sdf.min_inlier_fraction=0.9999",
+        f"tracking.recovery.carried={carried}",
     )
     result = run_slam(config, tmp_path / "run")
     metrics = result.metrics
@@ -161,6 +169,24 @@ def test_frames_the_map_cannot_confirm_are_carried_by_their_features(tmp_path: P
     truth = np.loadtxt(tmp_path / "run" / "trajectory_gt.txt")[:, 1:4]
     errors = np.linalg.norm(estimate - truth, axis=1)
     assert errors.max() < 0.05 < np.linalg.norm(truth - truth[0], axis=1).max() / 5
+    refused = (tmp_path / "run" / "log.txt").read_text().count("does not fit the map")
+    assert (refused > 0) == (carried == "true")
+
+
+@pytest.mark.parametrize(
+    ("carried", "real_time", "tries"),
+    [(None, False, True), (None, True, False), (True, True, True), (False, False, False)],
+)
+def test_carried_frames_skip_the_recovery_in_real_time_by_default(
+    reversal: Path, carried: bool | None, real_time: bool, tries: bool
+) -> None:
+    config = demo_config(reversal, "tracking.start=features")
+    recovery = dataclasses.replace(config.tracking.recovery, carried=carried)
+    config = dataclasses.replace(
+        config, tracking=dataclasses.replace(config.tracking, recovery=recovery)
+    )
+    context = SimpleNamespace(config=config, real_time=real_time)
+    assert Recovery(context, tracker=None).tries_carried is tries  # type: ignore[arg-type]
 
 
 @pytest.mark.parametrize(

@@ -9,7 +9,9 @@ filters (:mod:`eslam.slam.tracking.view_filters`), runs the tracker (``tracking.
 tracker said so, or its pose is not finite; after a failed or untracked frame, also one
 short of the recovery's inlier share) goes to the recovery
 (:mod:`eslam.slam.tracking.recovery`: other starting poses, relocalisation),
-and keeps the guess when nothing passes. The run loop appends the answer, a
+and keeps the guess when nothing passes; a failed frame whose start came from its
+features keeps that pose and, in real time, skips the recovery
+(``tracking.recovery.carried``). The run loop appends the answer, a
 :class:`TrackedFrame`, to the trajectory; observers report it.
 
 The front end keeps no state of its own between frames outside the run's state:
@@ -154,7 +156,7 @@ class TrackingFrontEnd:
         if recovery is not None and quality is not None:
             if not quality.failed and recovery.doubts(state) and not recovery.passes(quality):
                 pose, quality = guess, replace(quality, failed=True)
-            if quality.failed:
+            if quality.failed and (started is None or recovery.tries_carried):
                 found = recovery.recover(frame, whole, guess, state, query)
                 if found is not None:
                     pose, quality = found.pose, found.quality

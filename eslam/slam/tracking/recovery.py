@@ -25,6 +25,15 @@ emptied it) starts from a guess no tracked frame backs, so it too must reach
 a stretch without depth the tracker otherwise settles on a wrong pose with half its
 points on the floor.
 
+A failed frame whose start came from its features (``tracking.start: features``)
+keeps that pose: its features carry the camera. The tries above run for it too on
+recorded data; in real time (``carried``: null, the default) they are skipped, since
+the frames the camera sends while they run (over a second a frame on a CPU) are
+dropped, and the tries start from poses no better than the features' (the last pose,
+keyframes' poses, feature matches to keyframes verified against the same map). On
+7-Scenes every 33rd frame and the synthetic fast yaw both ways give the same
+trajectory (docs/results.md).
+
 A recovered frame is reported with how (:attr:`TrackingQuality.recovery`) and is made
 a keyframe by the back end, so the map grows into what it sees. A frame that fits
 nothing keeps the guess, as before. Every try draws its points from the run's
@@ -78,6 +87,9 @@ class Recovery:
         self.settings: RecoveryConfig = context.config.tracking.recovery
         self.tracker = tracker
         self.places = Places(context.config.tracking.features) if places is None else places
+        carried = self.settings.carried
+        # whether a failed frame carried by its features is tried too (module doc)
+        self.tries_carried = not context.real_time if carried is None else carried
 
     def recover(
         self,
