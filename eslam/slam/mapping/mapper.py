@@ -194,12 +194,7 @@ def map_learning_rates(config: MappingConfig, lr_factor: float) -> tuple[float, 
 def mapping_optimiser(
     field: SceneField, window: PoseWindow, config: MappingConfig, lr_factor: float
 ) -> torch.optim.Adam:
-    """Adam over planes, decoders (and beta) at ``lr_factor`` times their rates, and poses.
-
-    ``foreach``: each group's update as a few multi-tensor operations instead of a loop
-    of small ones per parameter: the same arithmetic in the same order, so the same
-    values bit for bit (tests/slam/test_mapping_optimiser.py), in less time on a CPU
-    (docs/benchmarks.md); on CUDA it is already Adam's default."""
+    """Adam over planes, decoders (and beta) at ``lr_factor`` times their rates, and poses."""
     planes, decoders = map_learning_rates(config, lr_factor)
     groups = [
         {"params": field.plane_parameters(), "lr": planes},
@@ -207,7 +202,7 @@ def mapping_optimiser(
     ]
     if window.parameters():
         groups.append({"params": window.parameters(), "lr": config.lr_poses})
-    return torch.optim.Adam(groups, foreach=True)
+    return torch.optim.Adam(groups)
 
 
 def mapping_loss(

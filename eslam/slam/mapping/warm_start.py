@@ -95,14 +95,12 @@ def warm_start_points(
 def warm_start_optimiser(
     field: SceneField, lr_planes: float, lr_decoder: float
 ) -> torch.optim.Adam:
-    """Adam over the geometry planes and the SDF decoder only (colour is left alone);
-    multi-tensor (``foreach``) as :func:`~eslam.slam.mapping.mapper.mapping_optimiser`."""
+    """Adam over the geometry planes and the SDF decoder only (colour is left alone)."""
     return torch.optim.Adam(
         [
             {"params": [level.planes for level in field.geometry.levels.values()], "lr": lr_planes},
             {"params": list(field.geometry_decoder.parameters()), "lr": lr_decoder},
-        ],
-        foreach=True,
+        ]
     )
 
 
