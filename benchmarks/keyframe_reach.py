@@ -34,15 +34,13 @@ from eslam.config import load_config
 from eslam.data import open_sequence
 from eslam.field.scene_field import SceneField
 from eslam.geometry.pose import pose_distance
-from eslam.io.checkpoint import load_checkpoint
-from eslam.io.trajectory import read_trajectory
-from eslam.mesh.observed import ObservedViews
 from eslam.render.rays import camera_directions
 from eslam.slam.session import run_slam
+from eslam.slam.state import load_state
 from eslam.slam.tracking.observed_view import observed_pixels
 from eslam.slam.tracking.sdf import SdfTracker, quality, sdf_points
 from eslam.slam.tracking.sdf_system import linearise
-from eslam.slam.views import View, make_view, restrict_view
+from eslam.slam.views import View, make_view, restrict_view, upload_frame
 
 HEADER = (
     "| frames on | observed share | inliers at the reference "
@@ -87,25 +85,21 @@ def main(argv: list[str] | None = None) -> None:
     truth = sequence.gt_poses()
     if truth is None or max(args.frames) >= len(sequence):
         raise SystemExit(f"{args.data}: needs ground truth and {max(args.frames) + 1} frames")
-    first = read_trajectory(args.out)[1][0] @ np.linalg.inv(truth[0])  # truth -> run frame
-    field = SceneField.from_state(config.field, load_checkpoint(args.out / "map.pt")["field"])
+    state = load_state(args.out / "map.pt", config, torch.device("cpu"))
+    field, views = state.field, state.observed_views()  # frame 0 mapped, as observed space
+    assert field is not None
     field.requires_grad_(False)
+    start = state.trajectory.poses[0].double().numpy()
+    first = start @ np.linalg.inv(truth[0])  # ground truth -> the run's frame
     directions = camera_directions(sequence.intrinsics)
     settings_sdf = config.tracking.sdf
     geometric = dataclasses.replace(settings_sdf, colour_weight=0.0)
     tracker = SdfTracker(geometric)
-    frame0 = sequence[0]
-    views = ObservedViews(
-        poses=torch.from_numpy(first @ truth[0]).float()[None],
-        depths=torch.from_numpy(frame0.depth).float()[None],
-        intrinsics=sequence.intrinsics,
-        margin=field.truncation,
-    )
     print(HEADER)
     for ahead in args.frames:
         frame = sequence[ahead]
-        rgb = torch.from_numpy(frame.rgb).float() / 255.0
-        view = make_view(rgb, torch.from_numpy(frame.depth), directions, config.tracking.border)
+        rgb, depth = upload_frame(frame.rgb, frame.depth, "cpu")
+        view = make_view(rgb, depth, directions, config.tracking.border)
         reference = torch.from_numpy(first @ truth[ahead]).float()
         points, _ = sdf_points(view, max(settings_sdf.levels), torch.Generator().manual_seed(0))
         inliers, _ = quality(linearise(field, points, reference, geometric), geometric)

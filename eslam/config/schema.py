@@ -423,9 +423,8 @@ class RecoveryConfig:
     carried: bool | None = None
     """Whether a failed frame whose start came from its features (``tracking.start:
     features``; such a frame keeps that pose) goes through the tries too. null: not in
-    real time (a live camera, ``--realtime``), where frames are dropped while the tries
-    run (over a second a frame on a CPU), yes on recorded data (docs/tracking.md,
-    "Recovery")."""
+    real time (a live camera, ``--realtime``), where the camera's frames are dropped
+    while the tries run, yes on recorded data (docs/tracking.md, "Recovery")."""
 
     def __post_init__(self) -> None:
         if not 0 <= self.min_inlier_fraction <= 1:

@@ -28,11 +28,9 @@ points on the floor.
 A failed frame whose start came from its features (``tracking.start: features``)
 keeps that pose: its features carry the camera. The tries above run for it too on
 recorded data; in real time (``carried``: null, the default) they are skipped, since
-the frames the camera sends while they run (over a second a frame on a CPU) are
-dropped, and the tries start from poses no better than the features' (the last pose,
-keyframes' poses, feature matches to keyframes verified against the same map). On
-7-Scenes every 33rd frame and the synthetic fast yaw both ways give the same
-trajectory (docs/results.md).
+the frames the camera sends while they run are dropped, and the tries start from
+poses no better than the features' (the last pose, keyframes' poses, feature matches
+to keyframes verified against the same map; what that measured: docs/results.md).
 
 A recovered frame is reported with how (:attr:`TrackingQuality.recovery`) and is made
 a keyframe by the back end, so the map grows into what it sees. A frame that fits
