@@ -136,3 +136,11 @@ def test_the_tum_cpu_preset_reads_every_frame_associate_py_pairs() -> None:
     assert load_config(CONFIGS / "tum" / "tum_cpu.yaml").data.pairing == "associate"
     for name in ("tum", "fr1_desk", "fr1_xyz", "fr2_xyz", "fr3_office"):
         assert load_config(CONFIGS / "tum" / f"{name}.yaml").data.pairing == "release"
+
+
+def test_the_tum_cpu_preset_stamps_frames_with_the_depth_time() -> None:
+    """docs/results.md "TUM RGB-D fr1/xyz, whole sequence" (the sdf tracker's poses are
+    the depth's); the paper's TUM configs keep the release's colour stamps."""
+    assert load_config(CONFIGS / "tum" / "tum_cpu.yaml").data.stamp == "depth"
+    for name in ("tum", "fr1_desk", "fr1_xyz", "fr2_xyz", "fr3_office"):
+        assert load_config(CONFIGS / "tum" / f"{name}.yaml").data.stamp == "colour"

@@ -94,6 +94,11 @@ class DataConfig:
     """TUM only: how colour and depth images make frames. release = the ESLAM release's
     rule (nearest depth within 0.08 s, a frame within 1/32 s of the last one dropped: 759
     of fr1/xyz's 798); associate = TUM's associate.py (unique pairs within 0.02 s: 792)."""
+    stamp: Literal["colour", "depth"] = "colour"
+    """TUM only: whose time stamps a frame (trajectory.txt) and picks its ground-truth
+    pose. colour = the colour image's (the release); depth = the depth image's, when
+    the camera was where the depth shows it (the Kinect's two streams are not
+    synchronised; docs/data.md). The images read are the same."""
     register_colour: bool = True
     """7-Scenes only: resample the colour image into the depth camera (its own focal length
     and a 2.5 cm baseline; eslam.data.registration) so texture lies on the geometry;

@@ -16,6 +16,13 @@ With ``data.pairing: associate`` colour and depth are paired as TUM's own
 ``associate.py`` does (:mod:`eslam.data.tum_pairs`: every frame it pairs, e.g. 792 of
 fr1/xyz's 798 where the release's rule keeps 759), each with its nearest pose.
 
+Time stamps: a frame carries its colour image's time and the ground-truth pose nearest
+to it (the release). The Kinect's colour and depth streams are not synchronised (a
+frame's two images are up to 20 ms apart under associate.py's pairing); a tracker that
+fits the depth estimates the camera when the depth image was taken, so ``data.stamp:
+depth`` stamps each frame, and picks its pose, with the depth image's time instead (the
+images are the same; docs/data.md, "Time stamps").
+
 Images: fr1 and fr2 colour AND depth are undistorted at 640x480 with the camera's
 plumb-bob coefficients (the release undistorts colour only), then resized to 512x384
 and cropped by 8 px on every side (release defaults; ``data.resize`` / ``data.crop``
@@ -233,6 +240,7 @@ def associate(
     max_dt: float = MAX_TIME_DIFFERENCE,
     frame_rate: float = RELEASE_FRAME_RATE,
     pairing: str = "release",
+    stamp: str = "colour",
 ) -> Association:
     """Pair every colour image with the nearest depth image and pose, as the release.
 
@@ -241,7 +249,8 @@ def associate(
     seconds after the previous kept one (release ``loadtum``). With ``pairing``
     "associate" the colour-depth pairs are TUM's ``associate.py``'s
     (:func:`~eslam.data.tum_pairs.unique_pairs`) and each keeps the nearest pose closer
-    than ``max_dt`` (no frame-rate rule).
+    than ``max_dt`` (no frame-rate rule). The pose is the one nearest the colour image's
+    time, or with ``stamp`` "depth" the depth image's (``data.stamp``).
 
     Args:
         colour_times: (N,) seconds, in rgb.txt order.
@@ -250,20 +259,25 @@ def associate(
         max_dt: largest time difference, seconds.
         frame_rate: highest frame rate kept, Hz.
         pairing: "release" or "associate" (``data.pairing``).
+        stamp: "colour" or "depth": whose time the pose is matched to (``data.stamp``).
     """
+    if stamp not in ("colour", "depth"):
+        raise ValueError(f"stamp must be 'colour' or 'depth', got {stamp!r}")
     if pairing == "associate":
         colour, depth = unique_pairs(colour_times, depth_times)
         if pose_times is None:
             return Association(colour, depth, None)
-        pose = nearest(pose_times, colour_times[colour])
-        timed = np.abs(pose_times[pose] - colour_times[colour]) < max_dt
+        times = colour_times[colour] if stamp == "colour" else depth_times[depth]
+        pose = nearest(pose_times, times)
+        timed = np.abs(pose_times[pose] - times) < max_dt
         return Association(colour[timed], depth[timed], pose[timed])
     depth = nearest(depth_times, colour_times)
     matched = np.abs(depth_times[depth] - colour_times) < max_dt
     pose = None
     if pose_times is not None:
-        pose = nearest(pose_times, colour_times)
-        matched &= np.abs(pose_times[pose] - colour_times) < max_dt
+        times = colour_times if stamp == "colour" else depth_times[depth]
+        pose = nearest(pose_times, times)
+        matched &= np.abs(pose_times[pose] - times) < max_dt
     kept: list[int] = []
     for index in np.flatnonzero(matched):
         if not kept or colour_times[index] - colour_times[kept[-1]] > 1.0 / frame_rate:
@@ -333,6 +347,7 @@ class TUMSequence(FileSequence):
             depth.timestamps,
             None if groundtruth is None else groundtruth.timestamps,
             pairing=options.pairing,
+            stamp=options.stamp,
         )
         if len(pairs.colour) == 0:
             with_pose = "" if groundtruth is None else f" and a pose in {gt_path.name}"
@@ -342,7 +357,11 @@ class TUMSequence(FileSequence):
                 "check that rgb.txt, depth.txt and groundtruth.txt come from one recording",
             )
         self.dropped = len(colour.timestamps) - len(pairs.colour)
-        self._times = colour.timestamps[pairs.colour]
+        self._times = (
+            colour.timestamps[pairs.colour]
+            if options.stamp == "colour"
+            else depth.timestamps[pairs.depth]
+        )
         self._colour_paths = [colour.paths[i] for i in pairs.colour]
         self._depth_paths = [depth.paths[i] for i in pairs.depth]
         _require_images(self._colour_paths, colour.path, "a depth image")

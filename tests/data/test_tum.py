@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import torch
 from PIL import Image
 
 from eslam.config import DataConfig
@@ -24,6 +25,7 @@ from eslam.data.tum import (
     read_groundtruth,
 )
 from eslam.errors import ConfigError, InputError
+from eslam.geometry import interpolate_pose
 from eslam.synthetic import FPS, Scene, SynthConfig, build_scene, camera_trajectory, render_frame
 from eslam.testing.tum import DEPTH_DELAY, TUM_EPOCH, write_tum_sequence
 from eslam.types import Frame
@@ -90,6 +92,34 @@ def test_fr3_round_trip_poses_timestamps_intrinsics(fr3_dir: Path, fr3_frames) -
         np.testing.assert_allclose(sequence.mocap_from_world @ pose, frame.pose_gt, atol=1e-12)
         relative = np.linalg.inv(fr3_frames[0].pose_gt) @ frame.pose_gt
         np.testing.assert_allclose(pose, relative, atol=1e-12)
+
+
+@pytest.mark.parametrize("pairing", ["release", "associate"])
+def test_depth_stamp_takes_the_depth_time_and_its_pose(
+    fr3_dir: Path, fr3_frames, pairing: str
+) -> None:
+    by_colour = TUMSequence(fr3_dir, DataConfig(format="tum", pairing=pairing))
+    by_depth = TUMSequence(fr3_dir, DataConfig(format="tum", pairing=pairing, stamp="depth"))
+    assert len(by_depth) == len(by_colour) == FRAMES
+    np.testing.assert_allclose(
+        by_depth.timestamps(), by_colour.timestamps() + DEPTH_DELAY, rtol=0, atol=1e-6
+    )
+    # the same images; the pose nearest the depth time (10 ms after the colour's) is the
+    # writer's sample a third of the way to the next frame (11.1 ms); the last frame
+    # has no later sample and keeps its own
+    np.testing.assert_array_equal(by_depth[1].depth, by_colour[1].depth)
+    np.testing.assert_array_equal(by_depth[1].rgb, by_colour[1].rgb)
+    mocap = by_depth.mocap_from_world @ by_depth.gt_poses()
+    for i, frame in enumerate(fr3_frames):
+        if i + 1 < FRAMES:
+            later = fr3_frames[i + 1].pose_gt
+            expected = interpolate_pose(
+                torch.from_numpy(frame.pose_gt), torch.from_numpy(later), 1 / 3
+            ).numpy()
+        else:
+            expected = frame.pose_gt
+        np.testing.assert_allclose(mocap[i], expected, atol=1e-9)
+    assert not np.allclose(mocap[0], fr3_frames[0].pose_gt, atol=1e-4)
 
 
 def test_fr3_round_trip_depth_colour_and_geometry(fr3_dir: Path, fr3_frames) -> None:
