@@ -154,7 +154,9 @@ class TrackingFrontEnd:
         pose, quality = judged(result, guess)
         recovery = self.recovery
         if recovery is not None and quality is not None:
-            if not quality.failed and recovery.doubts(state) and not recovery.passes(quality):
+            # a start from features rests on matched points, not on the failed pose
+            doubted = started is None and recovery.doubts(state)
+            if not quality.failed and doubted and not recovery.passes(quality):
                 pose, quality = guess, replace(quality, failed=True)
             if quality.failed and (started is None or recovery.tries_carried):
                 found = recovery.recover(frame, whole, guess, state, query)

@@ -23,7 +23,11 @@ The first try of a frame after a failed or untracked one (no depth, a view filte
 emptied it) starts from a guess no tracked frame backs, so it too must reach
 ``min_inlier_fraction`` (:meth:`Recovery.doubts`), else the tries above follow: after
 a stretch without depth the tracker otherwise settles on a wrong pose with half its
-points on the floor.
+points on the floor. A frame started from its features (``tracking.start: features``)
+is not doubted: its start comes from points matched to the last frame with features
+or to a keyframe, not from the failed frame's guess, and the tracker's own tests judge
+it as any other frame (in real time the stricter test failed frames the map held,
+and the track drifted while their features carried them: docs/results.md).
 
 A failed frame whose start came from its features (``tracking.start: features``)
 keeps that pose: its features carry the camera. The tries above run for it too on
