@@ -36,30 +36,12 @@ from _machine import command_line, cpu_model
 
 from eslam.config import ESLAMConfig, load_config
 from eslam.data import open_sequence
-from eslam.data.registration import EdgeView, edge_view, sample_bilinear
+from eslam.data.registration import edge_score, edge_view
 from eslam.errors import ESLAMError, InputError
-from eslam.geometry.camera import backproject_depth, project_points
-from eslam.types import Intrinsics
+from eslam.slam.mapping.colour_motion import moved_pixels
 
 GAP_BINS_MS = (0.0, 5.0, 10.0, 1e9)
 """|colour time - depth time| bins of the table's rows, ms."""
-
-
-def score_at(view: EdgeView, u: np.ndarray, v: np.ndarray) -> float:
-    """Mean colour gradient at colour pixels (u, v) over the depth edges of ``view``."""
-    moved = sample_bilinear(view.gradient, u, v)[..., 0]
-    return float((moved * view.edges).sum() / max(float(view.edges.sum()), 1e-9))
-
-
-def moved_pixels(
-    depth: np.ndarray, intrinsics: Intrinsics, colour_from_depth: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """Colour-image pixels of each depth pixel's point after the rigid motion
-    ``colour_from_depth`` (4, 4: depth-camera to colour-camera coordinates)."""
-    points = backproject_depth(torch.from_numpy(depth.astype(np.float64)), intrinsics)
-    colour_in_depth = torch.from_numpy(np.linalg.inv(colour_from_depth))
-    uv, _ = project_points(points, intrinsics, colour_in_depth)
-    return uv[..., 0].numpy(), uv[..., 1].numpy()
 
 
 @dataclass(frozen=True)
@@ -91,10 +73,11 @@ def measure(
         frame = by_depth[index]
         view = edge_view(frame.rgb, frame.depth, jump_m)
         v, u = np.mgrid[0 : frame.depth.shape[0], 0 : frame.depth.shape[1]].astype(np.float64)
-        shifted = np.array([score_at(view, u + dx, v + dy) for dx, dy in shifts])
+        shifted = np.array([edge_score(view, u + dx, v + dy) for dx, dy in shifts])
         colour_from_depth = np.linalg.inv(world @ gt_colour[index]) @ gt_depth[index]
-        u_m, v_m = moved_pixels(frame.depth, by_depth.intrinsics, colour_from_depth)
-        scores.append(FrameScore(float(gaps_ms[index]), score_at(view, u_m, v_m), shifted))
+        motion = torch.from_numpy(colour_from_depth)
+        u_m, v_m, _ = moved_pixels(frame.depth, by_depth.intrinsics, motion)
+        scores.append(FrameScore(float(gaps_ms[index]), edge_score(view, u_m, v_m), shifted))
     return scores
 
 

@@ -91,6 +91,9 @@ class Frame:
         pose_gt: (4, 4) float64 ground-truth camera-to-world pose (OpenCV axes), or
             None when the sequence has no ground truth for this frame.
         timestamp: seconds; the frame index when the dataset has no time stamps.
+        colour_delay: seconds from the depth image to the colour image (colour time
+            minus depth time); 0 where both are taken together or the reader cannot
+            tell (TUM's reader reads it).
     """
 
     index: int
@@ -99,6 +102,7 @@ class Frame:
     intrinsics: Intrinsics
     pose_gt: np.ndarray | None = None
     timestamp: float = 0.0
+    colour_delay: float = 0.0
 
     def __post_init__(self) -> None:
         h, w = self.intrinsics.height, self.intrinsics.width

@@ -681,6 +681,11 @@ class MappingConfig:
     """The frames between two keyframes follow the keyframes' refined poses (blended by
     where they lie between them: eslam/slam/mapping/carry.py); false = they keep their
     tracked pose (paper, release)."""
+    colour_motion: bool = False
+    """Move each keyframe's colour to its depth image's time by the camera's motion (a
+    sensor whose colour and depth are not taken together: TUM's Kinect; the reader's
+    Frame.colour_delay, 0 elsewhere: no change; eslam/slam/mapping/colour_motion.py);
+    false = the colour as read."""
     keyframe_device: str | None = None
     """Device holding keyframe images (uint8 colour, 16-bit depth); null = the run's device."""
     view_cache_mb: float = 1024.0

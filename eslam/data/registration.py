@@ -161,6 +161,12 @@ def alignment_score(views: list[EdgeView], depth_camera: Intrinsics, camera: Col
     scores = []
     for view in views:
         u_c, v_c = colour_pixel_of_depth_pixel(view.depth, depth_camera, camera)
-        moved = sample_bilinear(view.gradient, u_c, v_c)[..., 0]
-        scores.append(float((moved * view.edges).sum() / max(float(view.edges.sum()), 1e-9)))
+        scores.append(edge_score(view, u_c, v_c))
     return float(np.mean(scores))
+
+
+def edge_score(view: EdgeView, u: np.ndarray, v: np.ndarray) -> float:
+    """The colour gradient of ``view`` read at colour pixels (u, v) (two (H, W) arrays,
+    one per depth pixel), averaged over the depth edges: higher = better aligned."""
+    moved = sample_bilinear(view.gradient, u, v)[..., 0]
+    return float((moved * view.edges).sum() / max(float(view.edges.sum()), 1e-9))

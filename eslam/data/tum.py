@@ -42,7 +42,7 @@ from __future__ import annotations
 import math
 import re
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -54,7 +54,7 @@ from eslam.data.tum_pairs import unique_pairs
 from eslam.data.undistort import PlumbBob, Undistorter
 from eslam.errors import ConfigError, InputError
 from eslam.io.pose_files import TUM_COLUMNS, read_pose_table, text_lines, tum_poses
-from eslam.types import Intrinsics
+from eslam.types import Frame, Intrinsics
 
 TUM_DEPTH_SCALE = 5000.0
 """Depth PNG units per metre (TUM RGB-D file formats page; release tum.yaml png_depth_scale)."""
@@ -362,6 +362,7 @@ class TUMSequence(FileSequence):
             if options.stamp == "colour"
             else depth.timestamps[pairs.depth]
         )
+        self._colour_delays = colour.timestamps[pairs.colour] - depth.timestamps[pairs.depth]
         self._colour_paths = [colour.paths[i] for i in pairs.colour]
         self._depth_paths = [depth.paths[i] for i in pairs.depth]
         _require_images(self._colour_paths, colour.path, "a depth image")
@@ -372,6 +373,11 @@ class TUMSequence(FileSequence):
             poses = groundtruth.poses[pairs.pose]
             self.mocap_from_world = poses[0].copy()
             self._poses = _relative_to(poses[0], poses)
+
+    def __getitem__(self, index: int) -> Frame:
+        """Frame ``index`` with its colour image's delay after its depth image."""
+        frame = super().__getitem__(index)
+        return replace(frame, colour_delay=float(self._colour_delays[index]))
 
 
 def _relative_to(reference: np.ndarray, poses: np.ndarray) -> np.ndarray:

@@ -42,6 +42,7 @@ from eslam.slam.mapping.bounds_policy import (
     cover_keyframe,
 )
 from eslam.slam.mapping.carry import carried_poses, corrections
+from eslam.slam.mapping.colour_motion import colour_at_depth_time
 from eslam.slam.mapping.keyframe_views import KeyframeViews
 from eslam.slam.mapping.keyframes import KeyframeSchedule
 from eslam.slam.mapping.mapper import (
@@ -252,6 +253,8 @@ class KeyframeBackEnd:
         # a wrong depth unit mid-stream (a live source, a mixed folder) must not be mapped
         self.depth_check.check(frame.depth, source, f"frame {index} (a keyframe)")
         store = state.keyframes
+        if config.mapping.colour_motion and frame.colour_delay and index > 0:
+            frame = colour_at_depth_time(frame, state.trajectory, index)
         current = store.add(frame, index)
         own = state.component("back_end")
         own["bound_warned"] = cover_keyframe(
