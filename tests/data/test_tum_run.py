@@ -6,13 +6,16 @@ import json
 from pathlib import Path
 
 import numpy as np
+import pytest
 import torch
 
 from eslam.config import load_config
+from eslam.data import open_sequence
 from eslam.data.tum import TUM_CAMERAS
 from eslam.geometry.pose import pose_distance
 from eslam.io.trajectory import read_tum_trajectory
 from eslam.slam.session import run_slam
+from eslam.slam.state import load_state
 from eslam.synthetic import (
     FPS,
     SynthConfig,
@@ -22,6 +25,7 @@ from eslam.synthetic import (
     scene_bound,
 )
 from eslam.testing import write_tum_sequence
+from eslam.testing.tum import DEPTH_DELAY
 from eslam.types import Frame
 from eslam.workflows.demo import DEMO_CONFIG
 from tests.conftest import TINY as LOOP_TINY
@@ -73,3 +77,41 @@ def test_run_on_a_folder_without_groundtruth(tmp_path: Path) -> None:
     # measured: at most 7.4 mm and 0.45 deg, while the camera moves 3.6 cm in all
     assert float(truth[-1, :3, 3].norm()) > 0.03
     assert float(translation.max()) < 0.015 and float(rotation.max()) < np.radians(1.0)
+
+
+@pytest.mark.parametrize("moved", [True, False])
+def test_keyframe_colour_moves_to_the_depth_time_only_when_asked(
+    tmp_path: Path, moved: bool
+) -> None:
+    """``mapping.colour_motion``: a keyframe after the first stores its colour moved by
+    the camera's last step over TUM's colour-depth gap (the writer's depth comes 10 ms
+    after the colour); without it, the colour as read."""
+    config = SynthConfig(frames=4, seed=3)
+    scene = build_scene(config.scene, config.seed)
+    poses = camera_trajectory(scene, config)
+    k = TUM_CAMERAS["fr3"].intrinsics
+    frames = [Frame(i, *render_frame(scene, k, p), k, p, i / FPS) for i, p in enumerate(poses)]
+    data = tmp_path / "rgbd_dataset_freiburg3_synthetic"
+    write_tum_sequence(data, frames, camera="fr3")
+    overrides = [
+        f"data.path={data}",
+        "data.format=tum",
+        "data.resize=[80, 60]",
+        "data.crop=2",
+        f"scene.bound={_bound_in_first_camera(scene_bound(scene), poses[0])}",
+        "mapping.every=2",
+        f"mapping.colour_motion={str(moved).lower()}",
+        *TINY,
+    ]
+    run_config = load_config(DEMO_CONFIG, overrides)
+    run_slam(run_config, tmp_path / "run")
+    state = load_state(tmp_path / "run" / "map.pt", run_config, torch.device("cpu"))
+    sequence = open_sequence(run_config.data)
+    store = state.keyframes
+    later = [k for k, f in enumerate(store.frame_indices) if f > 0]
+    assert later
+    for keyframe in later:
+        read = sequence[store.frame_indices[keyframe]]
+        stored = np.rint(store.rgb(keyframe).numpy() * 255).astype(np.uint8)
+        assert read.colour_delay == pytest.approx(-DEPTH_DELAY, abs=1e-6)
+        assert np.array_equal(stored, read.rgb) is not moved

@@ -253,7 +253,7 @@ class KeyframeBackEnd:
         # a wrong depth unit mid-stream (a live source, a mixed folder) must not be mapped
         self.depth_check.check(frame.depth, source, f"frame {index} (a keyframe)")
         store = state.keyframes
-        if config.mapping.colour_motion and frame.colour_delay and index > 0:
+        if config.mapping.colour_motion:
             frame = colour_at_depth_time(frame, state.trajectory, index)
         current = store.add(frame, index)
         own = state.component("back_end")
