@@ -685,7 +685,7 @@ class MappingConfig:
     """Move each keyframe's colour to its depth image's time by the camera's motion (a
     sensor whose colour and depth are not taken together: TUM's Kinect; the reader's
     Frame.colour_delay, 0 elsewhere: no change; eslam/slam/mapping/colour_motion.py);
-    false = the colour as read."""
+    recorded data only (in real time the colour is kept as read); false = as read."""
     keyframe_device: str | None = None
     """Device holding keyframe images (uint8 colour, 16-bit depth); null = the run's device."""
     view_cache_mb: float = 1024.0

@@ -13,7 +13,11 @@ import torch
 from eslam.config import DataConfig
 from eslam.data.tum import TUM_CAMERAS, TUMSequence
 from eslam.geometry.pose import invert, se3_exp, se3_log
-from eslam.slam.mapping.colour_motion import colour_at_depth_time, colour_from_depth
+from eslam.slam.mapping.colour_motion import (
+    colour_at_depth_time,
+    colour_from_depth,
+    moves_colour,
+)
 from eslam.slam.trajectory import Trajectory
 from eslam.synthetic import FPS, SynthConfig, build_scene, camera_trajectory, render_frame
 from eslam.testing.tum import DEPTH_DELAY, write_tum_sequence
@@ -78,3 +82,14 @@ def test_the_tum_reader_gives_each_frame_its_colour_delay(tmp_path: Path) -> Non
     for stamp in ("colour", "depth"):
         sequence = TUMSequence(root, DataConfig(format="tum", stamp=stamp))
         assert sequence[1].colour_delay == pytest.approx(-DEPTH_DELAY, abs=1e-6)
+
+
+@pytest.mark.parametrize(
+    ("setting", "real_time", "moves"),
+    [(True, False, True), (True, True, False), (False, False, False), (False, True, False)],
+)
+def test_the_colour_moves_on_recorded_data_only(
+    setting: bool, real_time: bool, moves: bool
+) -> None:
+    """In real time the last step spans dropped frames: the colour is kept as read."""
+    assert moves_colour(setting, real_time) is moves

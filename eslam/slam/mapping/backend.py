@@ -42,7 +42,7 @@ from eslam.slam.mapping.bounds_policy import (
     cover_keyframe,
 )
 from eslam.slam.mapping.carry import carried_poses, corrections
-from eslam.slam.mapping.colour_motion import colour_at_depth_time
+from eslam.slam.mapping.colour_motion import colour_at_depth_time, moves_colour
 from eslam.slam.mapping.keyframe_views import KeyframeViews
 from eslam.slam.mapping.keyframes import KeyframeSchedule
 from eslam.slam.mapping.mapper import (
@@ -253,7 +253,7 @@ class KeyframeBackEnd:
         # a wrong depth unit mid-stream (a live source, a mixed folder) must not be mapped
         self.depth_check.check(frame.depth, source, f"frame {index} (a keyframe)")
         store = state.keyframes
-        if config.mapping.colour_motion:
+        if moves_colour(config.mapping.colour_motion, self.context.real_time):
             frame = colour_at_depth_time(frame, state.trajectory, index)
         current = store.add(frame, index)
         own = state.component("back_end")

@@ -17,6 +17,10 @@ With the poses T_prev and T (camera-to-world) of the previous frame and this one
 and a point X of the depth camera is at X_c = T_colour^-1 T X = Exp(-(delay / dt) Log M) X
 in the colour camera's frame, seen at pixel u = K X_c (the images share K: the depth is
 registered to the colour camera). Pixels without depth keep the colour as read.
+
+In real time the last step spans the frames dropped while the run was busy (a third of
+a second on a CPU), so its velocity stands for the motion over the gap poorly; there
+the colour is kept as read (:func:`moves_colour`; what that measured: docs/results.md).
 """
 
 from __future__ import annotations
@@ -31,6 +35,12 @@ from eslam.geometry.camera import backproject_depth, project_points
 from eslam.geometry.pose import invert, se3_exp, se3_log
 from eslam.slam.trajectory import Trajectory
 from eslam.types import Frame, Intrinsics
+
+
+def moves_colour(colour_motion: bool, real_time: bool) -> bool:
+    """Whether keyframes' colour is moved (``mapping.colour_motion``): on recorded data
+    only (module doc)."""
+    return colour_motion and not real_time
 
 
 def colour_from_depth(
