@@ -21,7 +21,11 @@ from pathlib import Path
 import numpy as np
 
 from eslam.errors import InputError
-from eslam.evaluate.trajectory import absolute_trajectory_error, relative_pose_error
+from eslam.evaluate.trajectory import (
+    absolute_trajectory_error,
+    pair_errors,
+    relative_pose_error,
+)
 from eslam.io.checkpoint import load_checkpoint
 from eslam.io.trajectory import read_tum_trajectory
 
@@ -33,22 +37,17 @@ def rms(values: np.ndarray) -> float:
 def split_errors(estimated: np.ndarray, truth: np.ndarray, keyframes: set[int]) -> dict:
     """RPE (mm, deg) of the pairs (i, i+1) with a keyframe in them and of the others;
     ATE (cm) of the keyframes and of the other frames, after one SE(3) alignment."""
-    pairs = np.arange(len(estimated) - 1)
-    with_keyframe = np.array([i in keyframes or i + 1 in keyframes for i in pairs])
+    errors = pair_errors(estimated, truth)
+    with_keyframe = np.array([i in keyframes or i + 1 in keyframes for i in errors.first])
     out = {}
     for name, chosen in (("keyframe", with_keyframe), ("other", ~with_keyframe)):
-        first = pairs[chosen]
-        if len(first) == 0:
+        if not chosen.any():
             out[f"rpe_{name}"] = (float("nan"), float("nan"), 0)
             continue
-        motion_est = np.linalg.inv(estimated[first]) @ estimated[first + 1]
-        motion_gt = np.linalg.inv(truth[first]) @ truth[first + 1]
-        error = np.linalg.inv(motion_gt) @ motion_est
-        cosine = np.clip((np.trace(error[:, :3, :3], axis1=1, axis2=2) - 1) / 2, -1.0, 1.0)
         out[f"rpe_{name}"] = (
-            1000 * rms(np.linalg.norm(error[:, :3, 3], axis=1)),
-            rms(np.degrees(np.arccos(cosine))),
-            len(first),
+            1000 * rms(errors.translation[chosen]),
+            rms(errors.rotation[chosen]),
+            int(chosen.sum()),
         )
     ate = absolute_trajectory_error(estimated, truth)
     is_keyframe = np.array([i in keyframes for i in range(len(estimated))])

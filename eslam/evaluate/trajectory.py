@@ -161,19 +161,30 @@ class RPEResult:
         }
 
 
-def relative_pose_error(
-    estimated: np.ndarray, ground_truth: np.ndarray, delta: int = 1
-) -> RPEResult:
-    """RPE of camera-to-world poses, as Sturm et al. (IROS 2012, the TUM RGB-D benchmark)
-    define it and evo's ``evo_rpe --delta 1 --delta_unit f`` computes it:
+@dataclass(frozen=True, eq=False)
+class PairErrors:
+    """The relative pose error of each pose pair (:func:`pair_errors`).
+
+    Attributes:
+        first: (M,) index of each pair's first pose (the second is ``first + delta``).
+        translation: (M,) |trans(E_i)|, metres.
+        rotation: (M,) angle(rot(E_i)), degrees.
+    """
+
+    first: np.ndarray
+    translation: np.ndarray
+    rotation: np.ndarray
+
+
+def pair_errors(estimated: np.ndarray, ground_truth: np.ndarray, delta: int = 1) -> PairErrors:
+    """Each pair's relative pose error, as Sturm et al. (IROS 2012, the TUM RGB-D
+    benchmark) define it and evo's ``evo_rpe --delta 1 --delta_unit f`` computes it:
 
         E_i = (Q_i^-1 Q_{i+delta})^-1 (P_i^-1 P_{i+delta})
 
     with Q the ground truth and P the estimate, matched row by row; the translation
     error is |trans(E_i)| and the rotation error the angle of rot(E_i),
-    arccos((trace(R) - 1) / 2). Needs no alignment (relative motions do not depend on
-    the world frame), so it measures the per-frame tracking error (jitter and local
-    drift) that the ATE mixes with the drift accumulated over the whole run.
+    arccos((trace(R) - 1) / 2).
 
     Args:
         estimated, ground_truth: (N, 4, 4) camera-to-world poses. A pair with a
@@ -199,15 +210,29 @@ def relative_pose_error(
     motion_gt = np.linalg.inv(ground_truth[first]) @ ground_truth[second]
     motion_est = np.linalg.inv(estimated[first]) @ estimated[second]
     error = np.linalg.inv(motion_gt) @ motion_est
-    translation = np.linalg.norm(error[:, :3, 3], axis=1)
     cosine = (np.trace(error[:, :3, :3], axis1=1, axis2=2) - 1.0) / 2.0
-    rotation = np.degrees(np.arccos(np.clip(cosine, -1.0, 1.0)))
+    return PairErrors(
+        first=np.asarray(first),
+        translation=np.linalg.norm(error[:, :3, 3], axis=1),
+        rotation=np.degrees(np.arccos(np.clip(cosine, -1.0, 1.0))),
+    )
+
+
+def relative_pose_error(
+    estimated: np.ndarray, ground_truth: np.ndarray, delta: int = 1
+) -> RPEResult:
+    """RPE statistics over the pairs of :func:`pair_errors` (same arguments and errors).
+    Needs no alignment (relative motions do not depend on the world frame), so it
+    measures the per-frame tracking error (jitter and local drift) that the ATE mixes
+    with the drift accumulated over the whole run."""
+    pairs = pair_errors(estimated, ground_truth, delta)
+    translation, rotation = pairs.translation, pairs.rotation
     return RPEResult(
         translation_rmse=float(np.sqrt(np.mean(translation**2))),
         translation_median=float(np.median(translation)),
         rotation_rmse=float(np.sqrt(np.mean(rotation**2))),
         rotation_median=float(np.median(rotation)),
-        pairs=len(first),
+        pairs=len(pairs.first),
         delta=delta,
     )
 

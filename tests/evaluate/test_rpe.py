@@ -11,6 +11,7 @@ from scipy.spatial.transform import Rotation
 from eslam.evaluate.trajectory import (
     TimedPoses,
     associate_timestamps,
+    pair_errors,
     relative_pose_error,
     trajectory_rpe,
 )
@@ -76,6 +77,18 @@ def test_delta_and_missing_poses() -> None:
     three = relative_pose_error(estimate, truth, delta=3)
     assert three.pairs == 5 and three.translation_rmse == pytest.approx(0.003, abs=1e-12)
     assert three.as_dict()["rpe_translation_rmse_mm"] == pytest.approx(3.0)
+
+
+def test_each_pair_keeps_its_error_and_first_index() -> None:
+    truth = _line(6)
+    estimate = truth.copy()
+    estimate[2, 1, 3] += 0.003
+    estimate[4] = np.nan
+    pairs = pair_errors(estimate, truth)
+    # pairs (0,1) (1,2) (2,3): 0, 3, 3 mm; (3,4) and (4,5) have a missing pose
+    assert pairs.first.tolist() == [0, 1, 2]
+    assert pairs.translation == pytest.approx([0.0, 0.003, 0.003], abs=1e-12)
+    assert pairs.rotation == pytest.approx([0.0, 0.0, 0.0], abs=1e-6)
 
 
 def test_bad_input_is_refused() -> None:

@@ -164,11 +164,7 @@ class ConcurrentBackEnd(KeyframeBackEnd):
         if state.field is None:
             self._create_field(frame, index, tracked.has_depth, state)
         known = len(state.keyframes) + (self.waiting is not None)
-        keyframe = not tracked.failed and (
-            tracked.recovered
-            or self.schedule.is_keyframe(index, tracked.has_depth, known)
-            or self.new_space(tracked)
-        )
+        keyframe = self.wants_keyframe(frame, index, tracked, state, known)
         if keyframe:
             self._queue(frame, index, state)
         state.last_mapped = tracked.failed or not tracked.has_depth

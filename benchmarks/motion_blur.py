@@ -1,0 +1,150 @@
+"""Motion blur in a finished run: how blurred its frames are, and what that costs.
+
+A turning camera blurs its colour images. This measures each frame's sharpness as the
+run read it (the variance of the Laplacian, :func:`eslam.slam.mapping.sharp_keyframes.
+image_sharpness`), the ground truth's turn rate into it (degrees per second), and the
+run's relative pose error into it (``eslam.evaluate.trajectory.pair_errors``, delta 1),
+then prints (markdown):
+
+- the rank correlation (Spearman) of sharpness with the turn rate and with the error;
+- the frames split into thirds by sharpness: the turn rate and the error in each;
+- the keyframes (the run's map.pt) split into blurred and sharp by the rule
+  ``mapping.blur_defer`` uses (below ``--ratio`` of the median of the 15 frames before):
+  the error of the step into the keyframe and of the step after it (the first frame
+  tracked on the map the keyframe changed).
+
+No SLAM runs here.
+
+    python benchmarks/motion_blur.py RUN_DIR [--data SEQUENCE] [--ratio 0.7]
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+from scipy.stats import spearmanr
+
+from eslam.config import load_config
+from eslam.data import open_sequence
+from eslam.errors import InputError
+from eslam.evaluate.trajectory import pair_errors
+from eslam.io.checkpoint import load_checkpoint
+from eslam.io.trajectory import read_tum_trajectory
+from eslam.slam.mapping.sharp_keyframes import HISTORY, image_sharpness, is_blurred
+
+
+def parse_args(argv: list[str] | None) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("run", type=Path, help="a finished run folder with ground truth")
+    parser.add_argument("--data", type=Path, help="the sequence (default: the run's)")
+    parser.add_argument("--ratio", type=float, default=0.7, help="blurred below this share")
+    return parser.parse_args(argv)
+
+
+def turn_rates(truth: np.ndarray, times: np.ndarray) -> np.ndarray:
+    """(N-1,) degrees per second the ground truth turns from frame i to i + 1."""
+    motion = np.linalg.inv(truth[:-1]) @ truth[1:]
+    cosine = np.clip((np.trace(motion[:, :3, :3], axis1=1, axis2=2) - 1) / 2, -1.0, 1.0)
+    return np.degrees(np.arccos(cosine)) / np.maximum(np.diff(times), 1e-9)
+
+
+def rms(values: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(np.square(values)))) if len(values) else float("nan")
+
+
+def blurred_frames(sharpness: np.ndarray, ratio: float) -> np.ndarray:
+    """Per frame, whether it is blurred against the :data:`HISTORY` frames before it."""
+    return np.array(
+        [
+            is_blurred(float(s), sharpness[max(0, i - HISTORY) : i].tolist(), ratio)
+            for i, s in enumerate(sharpness)
+        ]
+    )
+
+
+def report(
+    sharpness: np.ndarray,
+    truth: np.ndarray,
+    estimate: np.ndarray,
+    times: np.ndarray,
+    keyframes: list[int],
+    ratio: float,
+) -> list[str]:
+    """The markdown lines (module doc) for one run's frames."""
+    errors = pair_errors(estimate, truth)
+    into = errors.first + 1  # the frame each step leads into
+    turn = turn_rates(truth, times)[errors.first]
+    step_mm = 1000 * errors.translation
+    sharp_into = sharpness[into]
+    lines = [
+        f"- {len(sharpness)} frames; Spearman rank correlation of sharpness with the "
+        f"ground truth's turn rate {spearmanr(sharp_into, turn)[0]:+.2f}, with the "
+        f"translation RPE into the frame {spearmanr(sharp_into, step_mm)[0]:+.2f}",
+        "",
+        "| frames by sharpness | frames | turn rate (deg/s, median) | RPE into them |",
+        "|---|---:|---:|---:|",
+    ]
+    order = np.argsort(sharp_into)
+    for name, part in zip(
+        ("blurriest third", "middle third", "sharpest third"),
+        np.array_split(order, 3),
+        strict=True,
+    ):
+        lines.append(
+            f"| {name} | {len(part)} | {np.median(turn[part]):.1f} | "
+            f"{rms(step_mm[part]):.2f} mm / {rms(errors.rotation[part]):.3f} deg |"
+        )
+    blurred = blurred_frames(sharpness, ratio)
+    step_of = {int(frame): k for k, frame in enumerate(into)}
+    lines += [
+        "",
+        f"| keyframes (blurred: below {ratio:g} of the median of the {HISTORY} frames "
+        "before) | keyframes | RPE into the keyframe | RPE of the step after it |",
+        "|---|---:|---:|---:|",
+    ]
+    for name, chosen in (("blurred", True), ("sharp", False)):
+        frames = [k for k in keyframes if bool(blurred[k]) == chosen and k in step_of]
+        at = [step_of[k] for k in frames]
+        after = [step_of[k + 1] for k in frames if k + 1 in step_of]
+        lines.append(
+            f"| {name} | {len(frames)} | {rms(step_mm[at]):.2f} mm | {rms(step_mm[after]):.2f} mm |"
+        )
+    return lines
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse_args(argv)
+    run = args.run
+    try:
+        for name in ("config.yaml", "trajectory.txt", "trajectory_gt.txt", "map.pt"):
+            if not (run / name).is_file():
+                raise InputError(run / name, "missing", "give the folder of a finished run")
+        overrides = [] if args.data is None else [f"data.path={args.data}"]
+        config = load_config(run / "config.yaml", overrides)
+        times, estimate = read_tum_trajectory(run / "trajectory.txt")
+        _, truth = read_tum_trajectory(run / "trajectory_gt.txt", allow_missing=True)
+        sequence = open_sequence(config.data)
+    except InputError as error:
+        print(f"motion_blur.py: {error}", file=sys.stderr)
+        return 2
+    count = len(estimate)
+    if count > len(sequence) or not np.allclose(times, sequence.timestamps()[:count]):
+        print(
+            f"motion_blur.py: {run}: its frames are not the sequence's first {count}; "
+            "give the run's sequence with --data",
+            file=sys.stderr,
+        )
+        return 2
+    sharpness = np.array([image_sharpness(sequence[i].rgb) for i in range(count)])
+    keyframes = [int(i) for i in load_checkpoint(run / "map.pt")["keyframes"]["frame_indices"]]
+    print(f"## motion_blur: {run}")
+    print("")
+    print("\n".join(report(sharpness, truth, estimate, times, keyframes, args.ratio)))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
