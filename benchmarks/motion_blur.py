@@ -1,17 +1,25 @@
 """Motion blur in a finished run: how blurred its frames are, and what that costs.
 
 A turning camera blurs its colour images. This measures each frame's sharpness as the
-run read it (the variance of the Laplacian, :func:`eslam.slam.mapping.sharp_keyframes.
-image_sharpness`), the ground truth's turn rate into it (degrees per second), and the
-run's relative pose error into it (``eslam.evaluate.trajectory.pair_errors``, delta 1),
-then prints (markdown):
+run read it, the ground truth's turn rate into it (degrees per second), and the run's
+relative pose error into it (``eslam.evaluate.trajectory.pair_errors``, delta 1), then
+prints (markdown):
 
 - the rank correlation (Spearman) of sharpness with the turn rate and with the error;
 - the frames split into thirds by sharpness: the turn rate and the error in each;
-- the keyframes (the run's map.pt) split into blurred and sharp by the rule
-  ``mapping.blur_defer`` uses (below ``--ratio`` of the median of the 15 frames before):
+- the keyframes (the run's map.pt) split into blurred and sharp (:func:`is_blurred`):
   the error of the step into the keyframe and of the step after it (the first frame
   tracked on the map the keyframe changed).
+
+Sharpness is the variance of the image's Laplacian (Pech-Pacheco et al., "Diatom
+autofocusing in brightfield microscopy", ICPR 2000), on the grey image I in [0, 1]:
+
+    s = Var( d2I/dx2 + d2I/dy2 )
+
+(OpenCV's 3x3 aperture). Its scale depends on the scene's texture, so a frame is judged
+against the frames just before it: blurred when s < r * median(s of the HISTORY frames
+before it), r = ``--ratio``. The same rule deferring keyframes from blurred frames
+(``mapping.blur_defer``, commit d054c13) did not help: docs/results.md, "What we tried".
 
 No SLAM runs here.
 
@@ -24,16 +32,21 @@ import argparse
 import sys
 from pathlib import Path
 
+import cv2
 import numpy as np
 from scipy.stats import spearmanr
 
 from eslam.config import load_config
 from eslam.data import open_sequence
-from eslam.errors import InputError
+from eslam.errors import ConfigError, InputError
 from eslam.evaluate.trajectory import pair_errors
 from eslam.io.checkpoint import load_checkpoint
 from eslam.io.trajectory import read_tum_trajectory
-from eslam.slam.mapping.sharp_keyframes import HISTORY, image_sharpness, is_blurred
+
+HISTORY = 15
+"""Frames whose sharpness makes a frame's reference (half a second at 30 Hz)."""
+MIN_HISTORY = 3
+"""Frames known before any frame is judged blurred."""
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
@@ -42,6 +55,22 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--data", type=Path, help="the sequence (default: the run's)")
     parser.add_argument("--ratio", type=float, default=0.7, help="blurred below this share")
     return parser.parse_args(argv)
+
+
+def image_sharpness(rgb: np.ndarray) -> float:
+    """Variance of the Laplacian of ``rgb``'s grey image (module doc): (H, W, 3) uint8."""
+    if rgb.ndim != 3 or rgb.shape[2] != 3:
+        raise ValueError(f"expected an (H, W, 3) colour image, got shape {rgb.shape}")
+    grey = cv2.cvtColor(np.ascontiguousarray(rgb), cv2.COLOR_RGB2GRAY).astype(np.float32) / 255.0
+    return float(cv2.Laplacian(grey, cv2.CV_32F, ksize=1).var())
+
+
+def is_blurred(sharpness: float, history: list[float], ratio: float) -> bool:
+    """Whether ``sharpness`` is below ``ratio`` times the median of ``history`` (the
+    frames before it; never with fewer than :data:`MIN_HISTORY`)."""
+    if len(history) < MIN_HISTORY:
+        return False
+    return sharpness < ratio * float(np.median(history))
 
 
 def turn_rates(truth: np.ndarray, times: np.ndarray) -> np.ndarray:
@@ -127,7 +156,7 @@ def main(argv: list[str] | None = None) -> int:
         times, estimate = read_tum_trajectory(run / "trajectory.txt")
         _, truth = read_tum_trajectory(run / "trajectory_gt.txt", allow_missing=True)
         sequence = open_sequence(config.data)
-    except InputError as error:
+    except (InputError, ConfigError) as error:
         print(f"motion_blur.py: {error}", file=sys.stderr)
         return 2
     count = len(estimate)

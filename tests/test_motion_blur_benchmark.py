@@ -5,10 +5,12 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from eslam.synthetic import SynthConfig, SyntheticSequence
 from eslam.testing.scripts import load_script
 
 SCRIPT = Path(__file__).resolve().parents[1] / "benchmarks" / "motion_blur.py"
@@ -21,6 +23,26 @@ def _turning(count: int, degrees_per_frame: np.ndarray) -> np.ndarray:
     poses[:, :3, :3] = Rotation.from_rotvec(np.outer(angles, [0, 0, 1])).as_matrix()
     poses[:, 0, 3] = 0.01 * np.arange(count)
     return poses
+
+
+def test_sharpness_falls_with_blur() -> None:
+    script = load_script(SCRIPT)
+    rgb = SyntheticSequence(SynthConfig(frames=1, width=160, height=120, seed=0))[0].rgb
+    sharp = script.image_sharpness(rgb)
+    once = script.image_sharpness(cv2.GaussianBlur(rgb, (0, 0), 1.0))
+    assert sharp > 0 and once < 0.6 * sharp
+    assert script.image_sharpness(cv2.GaussianBlur(rgb, (0, 0), 3.0)) < once
+    assert script.image_sharpness(np.full_like(rgb, 128)) == 0.0
+    with pytest.raises(ValueError, match="colour image"):
+        script.image_sharpness(rgb[..., 0])
+
+
+def test_blur_is_judged_against_the_recent_median() -> None:
+    script = load_script(SCRIPT)
+    history = [1.0, 1.2, 0.8]
+    assert script.is_blurred(0.6, history, 0.7) and not script.is_blurred(0.8, history, 0.7)
+    assert not script.is_blurred(0.0, history[:2], 0.7)  # too little known
+    assert script.is_blurred(0.6, [*history, 100.0, 0.1], 0.7)  # the median, not the mean
 
 
 def test_turn_rates_are_degrees_per_second() -> None:
@@ -59,3 +81,13 @@ def test_a_folder_without_a_run_is_one_line_and_status_2(tmp_path: Path, capsys)
     script = load_script(SCRIPT)
     assert script.main([str(tmp_path)]) == 2
     assert "config.yaml: missing" in capsys.readouterr().err
+
+
+def test_a_run_of_another_version_is_one_line_and_status_2(tmp_path: Path, capsys) -> None:
+    script = load_script(SCRIPT)
+    for name in ("trajectory.txt", "trajectory_gt.txt", "map.pt"):
+        (tmp_path / name).write_text("")
+    (tmp_path / "config.yaml").write_text("mapping:\n  no_such_setting: 1\n")
+    assert script.main([str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert "unknown key 'mapping.no_such_setting'" in err and len(err.strip().splitlines()) == 1

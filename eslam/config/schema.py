@@ -633,12 +633,6 @@ class MappingConfig:
     """Also make a tracked frame a keyframe when less than this share of its pixels lay
     in observed space (needs ``tracking.observed_only``, which measures the share): the
     map grows as fast as a turning camera brings new space into view. 0 = off."""
-    blur_defer: int = 0
-    """A keyframe falling due on a blurred frame waits for the next sharp one, at most this
-    many frames (eslam/slam/mapping/sharp_keyframes.py); 0 = the fixed interval (paper)."""
-    blur_ratio: float = 0.7
-    """With ``blur_defer``: a frame is blurred when its sharpness (variance of the
-    Laplacian) is below this share of the median of the 15 frames before it."""
     window: int = 20
     """Keyframes optimised together: current, two latest, the rest drawn from the list."""
     selection: Literal["random", "overlap", "recent"] = "random"
@@ -717,9 +711,6 @@ class MappingConfig:
         _at_least(self, "every", 1)
         if not 0 <= self.keyframe_coverage < 1:
             raise ValueError(f"keyframe_coverage must be in [0, 1), got {self.keyframe_coverage}")
-        _at_least(self, "blur_defer", 0)
-        if not 0 < self.blur_ratio <= 1:
-            raise ValueError(f"blur_ratio must be in (0, 1], got {self.blur_ratio}")
         _at_least(self, "window", 3)
         _at_least(self, "rays", 1)
         _at_least(self, "iterations", 0)

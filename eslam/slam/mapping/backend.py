@@ -51,7 +51,6 @@ from eslam.slam.mapping.mapper import (
     MappingSettings,
     mapping_schedule,
 )
-from eslam.slam.mapping.sharp_keyframes import BlurDeferral
 from eslam.slam.run.observers import MappingDone, MappingStep
 from eslam.slam.state import FrameMark, SLAMState, new_field
 from eslam.slam.tracking.frontend import TrackedFrame
@@ -129,7 +128,6 @@ class KeyframeBackEnd:
         config = context.config
         self.context = context
         self.schedule = KeyframeSchedule(config.mapping.every)
-        self.deferral = BlurDeferral(config.mapping.blur_defer, config.mapping.blur_ratio)
         self.mapping = MappingSettings(config.mapping, config.render, config.loss)
         self.mapper = WindowMapper(self.mapping, config.compute.cuda_graphs)
         self.views: KeyframeViews | None = None
@@ -153,29 +151,21 @@ class KeyframeBackEnd:
             check_some_depth(index, total, len(state.keyframes), self.context.source)
         if state.field is None:
             self._create_field(frame, index, tracked.has_depth, state)
-        mapped = self.wants_keyframe(frame, index, tracked, state, len(state.keyframes))
+        mapped = self.wants_keyframe(index, tracked, len(state.keyframes))
         if mapped:
             self.map_frame(frame, index, state)
         state.last_mapped = mapped or tracked.failed or not tracked.has_depth
         return mapped
 
-    def wants_keyframe(
-        self, frame: Frame, index: int, tracked: TrackedFrame, state: SLAMState, known: int
-    ) -> bool:
+    def wants_keyframe(self, index: int, tracked: TrackedFrame, known: int) -> bool:
         """Whether frame ``index`` becomes a keyframe (``known`` exist or are queued): a
-        recovered frame, one reaching new space, or one the schedule makes due, which
-        with ``mapping.blur_defer`` waits for a sharp frame
-        (:mod:`eslam.slam.mapping.sharp_keyframes`)."""
-        due = not tracked.failed and self.schedule.is_keyframe(index, tracked.has_depth, known)
-        forced = not tracked.failed and (tracked.recovered or self.new_space(tracked))
-        if self.deferral.defer == 0:
-            return due or forced
-        own = state.component("sharp_keyframes")
-        usable = not tracked.failed and tracked.has_depth
-        taken = self.deferral.take(due, frame.rgb if usable else None, own)
-        if forced:
-            own.pop("waited", None)
-        return taken or forced
+        tracked frame the schedule makes one, one the front end recovered, or one
+        reaching new space."""
+        return not tracked.failed and (
+            tracked.recovered
+            or self.schedule.is_keyframe(index, tracked.has_depth, known)
+            or self.new_space(tracked)
+        )
 
     def new_space(self, tracked: TrackedFrame) -> bool:
         """Whether less than ``mapping.keyframe_coverage`` of the tracked frame lay in

@@ -164,7 +164,7 @@ class ConcurrentBackEnd(KeyframeBackEnd):
         if state.field is None:
             self._create_field(frame, index, tracked.has_depth, state)
         known = len(state.keyframes) + (self.waiting is not None)
-        keyframe = self.wants_keyframe(frame, index, tracked, state, known)
+        keyframe = self.wants_keyframe(index, tracked, known)
         if keyframe:
             self._queue(frame, index, state)
         state.last_mapped = tracked.failed or not tracked.has_depth
