@@ -20,6 +20,7 @@ from eslam.errors import ConfigError
 from eslam.evaluate.report import metrics_table
 from eslam.slam.places.features import (
     mutual_matches,
+    mutual_matches_reference,
     orb_features,
     residuals,
     rigid_fit,
@@ -168,6 +169,24 @@ def test_place_recognition_ranks_and_locates_a_frame(source: Path) -> None:
     shuffled = np.random.default_rng(0).permutation(len(world))  # no agreeing matches
     assert rigid_pose(camera[usable], world[shuffled], min_inliers=len(world) // 2) is None
     assert len(mutual_matches(query.descriptors[:1], key.descriptors)) == 0
+    reference = mutual_matches_reference(query.descriptors, key.descriptors)
+    assert len(pairs) > 20 and np.array_equal(pairs, reference)
+
+
+def test_mutual_matches_equal_their_reference_on_near_ties() -> None:
+    """Descriptors a few bits apart, many at equal distances: the matcher's pairs are
+    the reference's (ratio test, mutual nearest, lowest index on a tie)."""
+    rng = np.random.default_rng(0)
+    base = rng.integers(0, 256, (300, 32), dtype=np.uint8)
+    flips = rng.integers(0, 256, (300, 32), dtype=np.uint8) & rng.choice(
+        np.array([0, 1, 2, 4], dtype=np.uint8), (300, 32), p=[0.85, 0.05, 0.05, 0.05]
+    )
+    a, b = base, base[rng.permutation(300)] ^ flips
+    b = np.concatenate([b, b[:50]])  # exact duplicates in b: ties for a's nearest
+    for ratio in (0.6, 0.8, 1.0):
+        fast, reference = mutual_matches(a, b, ratio), mutual_matches_reference(a, b, ratio)
+        assert len(reference) > 50 and np.array_equal(fast, reference)
+    assert len(mutual_matches_reference(a[:1], b)) == 0
 
 
 def test_ransac_fits_its_samples_at_once_as_a_loop_over_them_would() -> None:
