@@ -19,7 +19,7 @@ autofocusing in brightfield microscopy", ICPR 2000), on the grey image I in [0, 
 (OpenCV's 3x3 aperture). Its scale depends on the scene's texture, so a frame is judged
 against the frames just before it: blurred when s < r * median(s of the HISTORY frames
 before it), r = ``--ratio``. The same rule deferring keyframes from blurred frames
-(``mapping.blur_defer``, commit d054c13) did not help: docs/results.md, "What we tried".
+(``mapping.blur_defer``, commit 83f894a) did not help: docs/results.md, "What we tried".
 
 No SLAM runs here.
 
