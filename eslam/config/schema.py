@@ -94,10 +94,6 @@ class DataConfig:
     """TUM only: how colour and depth images make frames. release = the ESLAM release's
     rule (nearest depth within 0.08 s, a frame within 1/32 s of the last one dropped: 759
     of fr1/xyz's 798); associate = TUM's associate.py (unique pairs within 0.02 s: 792)."""
-    colour_shift: tuple[float, float] | None = None
-    """TUM only: [dx, dy] pixels of the raw 640x480 image; each colour pixel (u, v) takes
-    the colour at (u + dx, v + dy), bilinear (benchmarks/colour_timing.py measures the
-    shift); null = the colour as read."""
     stamp: Literal["colour", "depth"] = "colour"
     """TUM only: whose time stamps a frame (trajectory.txt) and picks its ground-truth
     pose. colour = the colour image's (the release); depth = the depth image's, when

@@ -49,7 +49,6 @@ import numpy as np
 
 from eslam.config import DataConfig
 from eslam.data.base import FileSequence, FrameReading, require_dir, require_file
-from eslam.data.registration import sample_bilinear
 from eslam.data.transform import transform_from_options
 from eslam.data.tum_pairs import unique_pairs
 from eslam.data.undistort import PlumbBob, Undistorter
@@ -332,12 +331,11 @@ class TUMSequence(FileSequence):
             if distortion is not None and not distortion.is_identity
             else None
         )
-        self._colour_shift = options.colour_shift
         self.reading = FrameReading(
             self.camera.intrinsics,
             self.depth_scale,
             self.transform,
-            prepare=self._prepare if self._undistort or self._colour_shift else None,
+            prepare=None if self._undistort is None else self._undistort.images,
         )
         self.intrinsics = self.reading.intrinsics
         colour = read_file_list(self.root / "rgb.txt", "colour images")
@@ -376,27 +374,10 @@ class TUMSequence(FileSequence):
             self.mocap_from_world = poses[0].copy()
             self._poses = _relative_to(poses[0], poses)
 
-    def _prepare(self, rgb: np.ndarray, depth: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Undistort (fr1, fr2), then move the colour by ``data.colour_shift``."""
-        if self._undistort is not None:
-            rgb, depth = self._undistort.images(rgb, depth)
-        if self._colour_shift:
-            rgb = shifted_colour(rgb, *self._colour_shift)
-        return rgb, depth
-
     def __getitem__(self, index: int) -> Frame:
         """Frame ``index`` with its colour image's delay after its depth image."""
         frame = super().__getitem__(index)
         return replace(frame, colour_delay=float(self._colour_delays[index]))
-
-
-def shifted_colour(rgb: np.ndarray, dx: float, dy: float) -> np.ndarray:
-    """``rgb`` (H, W, 3 uint8) with pixel (u, v) taking the colour at (u + dx, v + dy),
-    bilinear, edges clamped, rounded (``data.colour_shift``)."""
-    height, width = rgb.shape[:2]
-    v, u = np.mgrid[0:height, 0:width].astype(np.float64)
-    moved = sample_bilinear(rgb, u + dx, v + dy)
-    return np.clip(np.rint(moved), 0, 255).astype(np.uint8)
 
 
 def _relative_to(reference: np.ndarray, poses: np.ndarray) -> np.ndarray:

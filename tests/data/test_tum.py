@@ -23,7 +23,6 @@ from eslam.data.tum import (
     camera_for,
     nearest,
     read_groundtruth,
-    shifted_colour,
 )
 from eslam.errors import ConfigError, InputError
 from eslam.geometry import interpolate_pose
@@ -121,22 +120,6 @@ def test_depth_stamp_takes_the_depth_time_and_its_pose(
             expected = frame.pose_gt
         np.testing.assert_allclose(mocap[i], expected, atol=1e-9)
     assert not np.allclose(mocap[0], fr3_frames[0].pose_gt, atol=1e-4)
-
-
-def test_colour_shift_reads_the_colour_from_beside(fr3_dir: Path) -> None:
-    """``data.colour_shift``: pixel (u, v) takes the colour at (u + dx, v + dy) of the raw
-    image (exact for whole pixels away from the border); the depth is untouched."""
-    ramp = np.zeros((6, 8, 3), dtype=np.uint8)
-    ramp[..., 0] = np.arange(8)[None, :] * 10
-    ramp[..., 1] = np.arange(6)[:, None] * 20
-    moved = shifted_colour(ramp, 2.0, -1.0)
-    np.testing.assert_array_equal(moved[1:, :6], ramp[:-1, 2:])
-    half = shifted_colour(ramp, 0.5, 0.0)
-    np.testing.assert_array_equal(half[:, :7, 0], ramp[:, :7, 0] + 5)
-    as_read = TUMSequence(fr3_dir, DataConfig(format="tum"))[1]
-    shifted = TUMSequence(fr3_dir, DataConfig(format="tum", colour_shift=(3.0, 0.0)))[1]
-    np.testing.assert_array_equal(shifted.depth, as_read.depth)
-    assert not np.array_equal(shifted.rgb, as_read.rgb)
 
 
 def test_fr3_round_trip_depth_colour_and_geometry(fr3_dir: Path, fr3_frames) -> None:
