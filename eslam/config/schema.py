@@ -481,6 +481,17 @@ class TrackingConfig:
     time) and jerks stay within the tracker's reach (docs/tracking.md, "Starting pose")."""
     start_min_matches: int = 20
     """Feature matches that must agree on the starting pose (RANSAC inliers within 3 cm)."""
+    start_overrule_matches: int = 300
+    """With ``start: features``: a start this many matches agree on (0: never) overrules
+    the tracker when the map pulls the camera more than ``start_overrule_shift`` from
+    it: the frame keeps its features' pose and counts failed (the map cannot confirm
+    it; docs/tracking.md, "When the features overrule the map")."""
+    start_overrule_shift: float = 0.05
+    """Metres between the tracker's camera centre and its start beyond which a start of
+    ``start_overrule_matches`` overrules the tracker."""
+    start_overrule_frames: int = 3
+    """The most frames in a row the features overrule; the next one takes the map's
+    pose (features alone drift: the map must get the camera back)."""
     features: FeaturesConfig = field(default_factory=FeaturesConfig)
     """The ORB features the starting pose, relocalisation and loop closure match."""
     observed_only: bool = False
@@ -501,6 +512,12 @@ class TrackingConfig:
         if self.border < 0:
             raise ValueError(f"border must be >= 0, got {self.border}")
         _at_least(self, "start_min_matches", 6)
+        _at_least(self, "start_overrule_matches", 0)
+        _at_least(self, "start_overrule_frames", 1)
+        if not self.start_overrule_shift > 0:
+            raise ValueError(
+                f"start_overrule_shift must be > 0 metres, got {self.start_overrule_shift}"
+            )
 
 
 MOVED_KEYS = {

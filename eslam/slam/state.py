@@ -137,11 +137,14 @@ TRACKING_COLUMNS = (
     "tracking_degenerate_directions",
     "tracking_recovery",
     "tracking_recovered_from",
+    "tracking_start_matches",
+    "tracking_start_shift_m",
+    "tracking_overruled",
 )
 """The columns of :attr:`SLAMState.tracking_quality` (the fields of
-:class:`~eslam.slam.tracking.base.TrackingQuality`; failed as 1/0; recovery as 0 when
-the first try passed or nothing recovered the frame, else 1 + its place in
-:data:`~eslam.slam.tracking.base.RECOVERIES`), also the names of timings.json's
+:class:`~eslam.slam.tracking.base.TrackingQuality`; failed and overruled as 1/0;
+recovery as 0 when the first try passed or nothing recovered the frame, else 1 + its
+place in :data:`~eslam.slam.tracking.base.RECOVERIES`), also the names of timings.json's
 per-frame lists."""
 
 
@@ -158,6 +161,9 @@ def quality_row(quality: TrackingQuality | None) -> list[float]:
         float("nan") if quality.degenerate_directions is None else quality.degenerate_directions,
         0.0 if quality.recovery is None else 1.0 + RECOVERIES.index(quality.recovery),
         float("nan") if quality.recovered_from is None else float(quality.recovered_from),
+        float("nan") if quality.start_matches is None else float(quality.start_matches),
+        float("nan") if quality.start_shift_m is None else quality.start_shift_m,
+        float(quality.overruled),
     ]
 
 
@@ -226,7 +232,8 @@ def degenerate_stretch(rows: list[list[float]]) -> int:
 
 def quality_rows(saved: list[list[float]]) -> list[list[float]]:
     """Checkpointed quality rows at today's width: a map saved before the information
-    columns existed has 4 per row; the missing ones read NaN (not computed)."""
+    (or the start's) columns existed has 4 (or 8) per row; the missing ones read NaN
+    (not computed)."""
     width = len(TRACKING_COLUMNS)
     return [list(row) + [float("nan")] * (width - len(row)) for row in saved]
 

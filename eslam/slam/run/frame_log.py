@@ -1,5 +1,6 @@
 """What a frame's tracking says in the run's log: frames without depth, failed frames
-and where a run of them ends, frames the recovery found after a failed try (and how),
+(those whose image features overruled the tracker, and by how much) and where a run of
+them ends, frames the recovery found after a failed try (and how),
 frames a view filter emptied, and where a stretch of degenerate views begins and ends.
 
 :class:`FrameLogObserver` reads each :class:`~eslam.slam.run.observers.FrameDone`; the
@@ -44,7 +45,17 @@ class FrameLogObserver(RunObserverBase):
                 frame.emptied_by,
             )
         quality = frame.quality
-        if frame.failed:
+        if frame.failed and quality is not None and quality.overruled:
+            self.log.warning(
+                "frame %d (timestamp %.6f): the map moved the camera %.1f cm from the pose"
+                " its image features agree on (%.0f%% inliers there): the features' pose"
+                " is kept and the frame is no keyframe",
+                frame.index,
+                timestamp,
+                100.0 * (quality.start_shift_m or 0.0),
+                100.0 * quality.inlier_fraction,
+            )
+        elif frame.failed:
             assert quality is not None
             self.log.warning(
                 "frame %d (timestamp %.6f): tracking failed (%.0f%% inliers, residual %.1f mm):"

@@ -43,6 +43,13 @@ class TrackingQuality:
             None when the first try passed (or nothing recovered it).
         recovered_from: the frame index of the keyframe whose pose the recovered try
             started from (``start`` from a keyframe, ``relocalised``), else None.
+        start_matches: the feature matches that agreed on the frame's start
+            (``tracking.start: features``), None when it started from the motion model.
+        start_shift_m: metres the tracker moved the camera centre from that start
+            (frames the tracker passed), else None.
+        overruled: the start overruled the tracker (the map pulled the camera more than
+            ``tracking.start_overrule_shift`` from it): the frame failed and keeps the
+            features' pose (:mod:`eslam.slam.tracking.feature_start`).
     """
 
     iterations: int
@@ -53,6 +60,9 @@ class TrackingQuality:
     degenerate_directions: int | None = None
     recovery: Recovery | None = None
     recovered_from: int | None = None
+    start_matches: int | None = None
+    start_shift_m: float | None = None
+    overruled: bool = False
 
 
 @dataclass(frozen=True, eq=False)

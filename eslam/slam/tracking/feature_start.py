@@ -19,6 +19,15 @@ with its pose now) gives the starting pose: frame-to-frame visual odometry as a 
 alignment, the SDF tracker then refining it against the map. A frame with fewer than
 ``start_min_matches`` agreeing matches starts from the motion model's guess, as before.
 
+A start that many matches agree on (``start_overrule_matches``) also checks the
+tracker's answer (:meth:`FeatureStart.overrules`): when the map pulls the camera more
+than ``start_overrule_shift`` from it, the map is the one in doubt (a stale or thin map
+the view reaches past: in real-time replays of TUM fr1/xyz such frames passed the
+tracker's tests 5-14 cm off while their features' pose was within 2.5 cm of the
+truth; docs/tracking.md), and the frame keeps its features' pose and counts failed
+(no keyframe). At most ``start_overrule_frames`` in a row: features alone drift, and
+the map must be able to take the camera back.
+
 The previous frame's features are this component's state (``state.components``,
 :data:`COMPONENT`): checkpointed and rolled back with the frame, so a resumed run
 starts each frame as the uninterrupted one does (the fit's samples are drawn with the
@@ -35,13 +44,16 @@ import torch
 from eslam.slam.places.features import Features
 from eslam.slam.places.index import Place, Places, describe, pose_from_matches
 from eslam.slam.state import SLAMState
+from eslam.slam.tracking.base import TrackingQuality
 from eslam.types import Frame
 
 COMPONENT = "feature_start"
 """The key of this component's state in ``state.components``: the last tracked
-frame's index and its features (``frame`` and :data:`FEATURES`) and how many
+frame's index and its features (``frame`` and :data:`FEATURES`), how many
 frames started from where (``starts``: :data:`STARTS` -> count; metrics.json's
-``tracking_starts``)."""
+``tracking_starts``), how many frames the features overruled (``overruled``;
+metrics.json's ``tracking_overruled``) and how many of the latest frames in a row
+(``overruled_streak``)."""
 
 FEATURES = ("pixels", "descriptors", "points")
 """The fields of :class:`~eslam.slam.places.features.Features` kept, in its order."""
@@ -49,6 +61,22 @@ FEATURES = ("pixels", "descriptors", "points")
 STARTS = ("previous_frame", "keyframe", "motion_model")
 """Where a frame's start came from: features matched to the previous frame's, to the
 latest keyframe's, or (too few agreed) the motion model's guess."""
+
+
+@dataclass(frozen=True)
+class OverruleRule:
+    """When a start of features overrules the tracker (module doc).
+
+    Attributes:
+        matches: agreeing matches the start needs (``tracking.start_overrule_matches``).
+        shift: metres the tracker must move the camera centre from it
+            (``tracking.start_overrule_shift``).
+        frames: the most frames in a row (``tracking.start_overrule_frames``).
+    """
+
+    matches: int
+    shift: float
+    frames: int
 
 
 @dataclass(frozen=True, eq=False)
@@ -72,11 +100,15 @@ class FeatureStart:
     Args:
         places: the run's place index.
         min_matches: matches that must agree on the pose (RANSAC inliers within 3 cm).
+        overrule: the rule by which a start overrules the tracker (None: never).
     """
 
-    def __init__(self, places: Places, min_matches: int) -> None:
+    def __init__(
+        self, places: Places, min_matches: int, overrule: OverruleRule | None = None
+    ) -> None:
         self.places = places
         self.min_matches = min_matches
+        self.overrule = overrule
 
     def describe(self, frame: Frame, state: SLAMState) -> Place:
         """``frame`` as a place (global descriptor and ORB features with depth)."""
@@ -120,6 +152,31 @@ class FeatureStart:
             return None
         return FeatureStartResult(torch.from_numpy(match.pose), frames[latest], match.inliers)
 
+    def overrules(
+        self, found: FeatureStartResult, quality: TrackingQuality, state: SLAMState
+    ) -> bool:
+        """Whether the start ``found`` overrules the tracker's answer, judged
+        ``quality`` with its ``start_shift_m`` (the module doc's rule: a passed frame
+        whose start ``overrule.matches`` agree on, moved more than ``overrule.shift``,
+        fewer than ``overrule.frames`` frames in a row before it). Called once per
+        frame tracked from features: counts the overruled frames and the streak."""
+        entry = state.component(COMPONENT)
+        streak = int(entry.get("overruled_streak", 0))
+        rule = self.overrule
+        shift = quality.start_shift_m
+        overrule = (
+            rule is not None
+            and not quality.failed
+            and shift is not None
+            and found.inliers >= rule.matches
+            and shift > rule.shift
+            and streak < rule.frames
+        )
+        entry["overruled_streak"] = streak + 1 if overrule else 0
+        if overrule:
+            entry["overruled"] = int(entry.get("overruled", 0)) + 1
+        return overrule
+
     def remember(self, query: Place, state: SLAMState) -> None:
         """Keep ``query``, the features of the frame just tracked (or failed with its
         pose from features), as the next frame's reference (in ``state.components``)."""
@@ -133,8 +190,19 @@ class FeatureStart:
         )
 
 
+def start_shift(found: FeatureStartResult, pose: torch.Tensor) -> float:
+    """Metres between the camera centres of the start ``found`` and the tracker's
+    ``pose`` (reads the device once)."""
+    moved = pose.detach().to("cpu", torch.float64)[:3, 3] - found.pose[:3, 3]
+    return float(torch.linalg.vector_norm(moved))
+
+
 def start_metrics(state: SLAMState) -> dict:
     """metrics.json's ``tracking_starts`` (frames by where their start came from,
-    :data:`STARTS`) when the run starts frames from features, else nothing."""
-    starts = state.components.get(COMPONENT, {}).get("starts")
-    return {} if starts is None else {"tracking_starts": dict(starts)}
+    :data:`STARTS`) and ``tracking_overruled`` (frames whose features overruled the
+    tracker) when the run starts frames from features, else nothing."""
+    entry = state.components.get(COMPONENT, {})
+    starts = entry.get("starts")
+    if starts is None:
+        return {}
+    return {"tracking_starts": dict(starts), "tracking_overruled": int(entry.get("overruled", 0))}

@@ -5,7 +5,10 @@ the motion model's guess (:func:`~eslam.slam.tracking.trackers.predict_pose`; wi
 ``tracking.start: features`` the pose image features give,
 :mod:`eslam.slam.tracking.feature_start`), applies its view
 filters (:mod:`eslam.slam.tracking.view_filters`), runs the tracker (``tracking.method``, from
-:data:`~eslam.slam.tracking.trackers.TRACKERS`) and judges the result: a failed frame (the
+:data:`~eslam.slam.tracking.trackers.TRACKERS`) and judges the result: a frame whose
+start of features overrules the tracker keeps that start and fails
+(:meth:`~eslam.slam.tracking.feature_start.FeatureStart.overrules`; no recovery: its
+pose is known); a failed frame (the
 tracker said so, or its pose is not finite; after a failed or untracked frame, also one
 short of the recovery's inlier share) goes to the recovery
 (:mod:`eslam.slam.tracking.recovery`: other starting poses, relocalisation),
@@ -36,7 +39,7 @@ from eslam.slam.mapping.bounds_policy import first_pose
 from eslam.slam.places.index import Places
 from eslam.slam.state import SLAMState, failed_row, recovery_of
 from eslam.slam.tracking.base import Tracker, TrackingQuality, judged
-from eslam.slam.tracking.feature_start import FeatureStart
+from eslam.slam.tracking.feature_start import FeatureStart, OverruleRule, start_shift
 from eslam.slam.tracking.recovery import Recovery
 from eslam.slam.tracking.trackers import make_tracker, motion_guess
 from eslam.slam.tracking.view_filters import ViewFilter, make_filters
@@ -115,8 +118,15 @@ class TrackingFrontEnd:
         if recovery is None and settings.recovery.enabled:
             recovery = Recovery(context, self.tracker, places)
         self.recovery = recovery
+        overrule = None
+        if settings.start_overrule_matches > 0:
+            overrule = OverruleRule(
+                settings.start_overrule_matches,
+                settings.start_overrule_shift,
+                settings.start_overrule_frames,
+            )
         self.feature_start = (
-            FeatureStart(places, settings.start_min_matches)
+            FeatureStart(places, settings.start_min_matches, overrule)
             if settings.start == "features"
             else None
         )
@@ -152,8 +162,13 @@ class TrackingFrontEnd:
             return TrackedFrame(guess, has_depth)
         result = self.tracker.track(state.field, view, guess, state.generator)
         pose, quality = judged(result, guess)
+        if self.feature_start is not None and started is not None and quality is not None:
+            shift = None if quality.failed else start_shift(started, pose)
+            quality = replace(quality, start_matches=started.inliers, start_shift_m=shift)
+            if self.feature_start.overrules(started, quality, state):
+                pose, quality = guess, replace(quality, failed=True, overruled=True)
         recovery = self.recovery
-        if recovery is not None and quality is not None:
+        if recovery is not None and quality is not None and not quality.overruled:
             # a start from features rests on matched points, not on the failed pose
             doubted = started is None and recovery.doubts(state)
             if not quality.failed and doubted and not recovery.passes(quality):
