@@ -27,7 +27,7 @@ from eslam.evaluate.trajectory import (
     relative_pose_error,
 )
 from eslam.io.checkpoint import load_checkpoint
-from eslam.io.trajectory import read_tum_trajectory
+from eslam.io.trajectory import read_run_trajectories
 
 
 def rms(values: np.ndarray) -> float:
@@ -60,13 +60,7 @@ def split_errors(estimated: np.ndarray, truth: np.ndarray, keyframes: set[int]) 
 
 def run_row(run: Path) -> str:
     """The markdown row of the run in ``run``."""
-    for name in ("trajectory.txt", "trajectory_gt.txt", "map.pt"):
-        if not (run / name).is_file():
-            raise InputError(
-                run / name, "missing", "give the folder of a finished run with ground truth"
-            )
-    _, estimated = read_tum_trajectory(run / "trajectory.txt")
-    _, truth = read_tum_trajectory(run / "trajectory_gt.txt", allow_missing=True)
+    _, estimated, truth = read_run_trajectories(run, "map.pt")
     state = load_checkpoint(run / "map.pt")
     keyframes = {int(i) for i in state["keyframes"]["frame_indices"]}
     e = split_errors(estimated, truth, keyframes)

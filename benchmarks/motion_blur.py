@@ -41,7 +41,7 @@ from eslam.data import open_sequence
 from eslam.errors import ConfigError, InputError
 from eslam.evaluate.trajectory import pair_errors
 from eslam.io.checkpoint import load_checkpoint
-from eslam.io.trajectory import read_tum_trajectory
+from eslam.io.trajectory import read_run_trajectories
 
 HISTORY = 15
 """Frames whose sharpness makes a frame's reference (half a second at 30 Hz)."""
@@ -148,13 +148,9 @@ def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     run = args.run
     try:
-        for name in ("config.yaml", "trajectory.txt", "trajectory_gt.txt", "map.pt"):
-            if not (run / name).is_file():
-                raise InputError(run / name, "missing", "give the folder of a finished run")
+        times, estimate, truth = read_run_trajectories(run, "config.yaml", "map.pt")
         overrides = [] if args.data is None else [f"data.path={args.data}"]
         config = load_config(run / "config.yaml", overrides)
-        times, estimate = read_tum_trajectory(run / "trajectory.txt")
-        _, truth = read_tum_trajectory(run / "trajectory_gt.txt", allow_missing=True)
         sequence = open_sequence(config.data)
     except (InputError, ConfigError) as error:
         print(f"motion_blur.py: {error}", file=sys.stderr)

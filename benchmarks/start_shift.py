@@ -27,7 +27,7 @@ import numpy as np
 
 from eslam.errors import InputError
 from eslam.evaluate.trajectory import absolute_trajectory_error, pair_errors
-from eslam.io.trajectory import read_tum_trajectory
+from eslam.io.trajectory import read_run_trajectories
 
 
 @dataclass(frozen=True)
@@ -84,11 +84,7 @@ def shift_report(
 
 def read_run(run: Path) -> tuple[np.ndarray, np.ndarray, dict]:
     """A finished run's poses, ground truth and timings.json."""
-    for name in ("trajectory.txt", "trajectory_gt.txt", "timings.json"):
-        if not (run / name).is_file():
-            raise InputError(
-                run / name, "missing", "give the folder of a finished run with ground truth"
-            )
+    _, estimated, truth = read_run_trajectories(run, "timings.json")
     timings = json.loads((run / "timings.json").read_text())
     if "tracking_start_shift_m" not in timings:
         raise InputError(
@@ -96,8 +92,6 @@ def read_run(run: Path) -> tuple[np.ndarray, np.ndarray, dict]:
             "has no tracking_start_shift_m",
             "give a run that started its frames from features (tracking.start: features)",
         )
-    _, estimated = read_tum_trajectory(run / "trajectory.txt")
-    _, truth = read_tum_trajectory(run / "trajectory_gt.txt", allow_missing=True)
     return estimated, truth, timings
 
 

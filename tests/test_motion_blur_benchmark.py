@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from eslam.io.trajectory import write_tum_trajectory
 from eslam.synthetic import SynthConfig, SyntheticSequence
 from eslam.testing.scripts import load_script
 
@@ -80,13 +81,14 @@ def test_blurred_keyframes_carry_the_steps_put_after_them() -> None:
 def test_a_folder_without_a_run_is_one_line_and_status_2(tmp_path: Path, capsys) -> None:
     script = load_script(SCRIPT)
     assert script.main([str(tmp_path)]) == 2
-    assert "config.yaml: missing" in capsys.readouterr().err
+    assert "trajectory.txt: missing" in capsys.readouterr().err
 
 
 def test_a_run_of_another_version_is_one_line_and_status_2(tmp_path: Path, capsys) -> None:
     script = load_script(SCRIPT)
-    for name in ("trajectory.txt", "trajectory_gt.txt", "map.pt"):
-        (tmp_path / name).write_text("")
+    for name in ("trajectory.txt", "trajectory_gt.txt"):
+        write_tum_trajectory(tmp_path / name, np.arange(2.0), np.tile(np.eye(4), (2, 1, 1)))
+    (tmp_path / "map.pt").write_text("")
     (tmp_path / "config.yaml").write_text("mapping:\n  no_such_setting: 1\n")
     assert script.main([str(tmp_path)]) == 2
     err = capsys.readouterr().err

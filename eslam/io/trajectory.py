@@ -102,6 +102,32 @@ def read_tum_trajectory(
     return tum_poses(read_pose_table(path, (TUM_COLUMNS,)), allow_missing)
 
 
+def read_run_trajectories(
+    run: str | Path, *needed: str
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A finished run folder's time stamps, estimate and ground truth: its
+    ``trajectory.txt`` and ``trajectory_gt.txt`` (a ground-truth pose the run could not
+    score reads as all NaN), row for row.
+
+    Args:
+        run: the run folder.
+        needed: other files of it the caller reads (e.g. ``map.pt``), checked too.
+
+    Raises:
+        InputError: a file missing (named; the fix: a finished run with ground truth),
+            or unreadable.
+    """
+    run = Path(run)
+    for name in (RUN_TRAJECTORY, RUN_TRAJECTORY_GT, *needed):
+        if not (run / name).is_file():
+            raise InputError(
+                run / name, "missing", "give the folder of a finished run with ground truth"
+            )
+    times, estimated = read_tum_trajectory(run / RUN_TRAJECTORY)
+    _, truth = read_tum_trajectory(run / RUN_TRAJECTORY_GT, allow_missing=True)
+    return times, estimated, truth
+
+
 def read_trajectory(
     path: str | Path, ground_truth: bool = False, allow_missing: bool = False
 ) -> tuple[np.ndarray, np.ndarray]:

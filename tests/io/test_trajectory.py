@@ -11,7 +11,12 @@ import torch
 
 from eslam.errors import InputError
 from eslam.geometry.rotation import so3_exp
-from eslam.io.trajectory import read_trajectory, read_tum_trajectory, write_tum_trajectory
+from eslam.io.trajectory import (
+    read_run_trajectories,
+    read_trajectory,
+    read_tum_trajectory,
+    write_tum_trajectory,
+)
 
 
 def _random_poses(count: int, seed: int = 0) -> np.ndarray:
@@ -213,3 +218,22 @@ def test_missing_poses_are_read_as_nan_only_when_allowed(tmp_path: Path) -> None
     replica.write_text(" ".join(["2"] * 16) + "\n")  # finite but not rigid: still an error
     with pytest.raises(InputError, match="not a rigid transform"):
         read_trajectory(replica, allow_missing=True)
+
+
+def test_a_run_folder_gives_its_estimate_and_ground_truth_row_for_row(tmp_path: Path) -> None:
+    poses = _random_poses(5)
+    stamps = np.arange(5.0)
+    write_tum_trajectory(tmp_path / "trajectory.txt", stamps, poses)
+    with pytest.raises(InputError, match=r"trajectory_gt\.txt.*missing.*finished run"):
+        read_run_trajectories(tmp_path)
+    write_tum_trajectory(tmp_path / "trajectory_gt.txt", stamps, poses)
+    lines = (tmp_path / "trajectory_gt.txt").read_text().splitlines()
+    row = next(i for i, line in enumerate(lines) if line.startswith("2."))
+    lines[row] = "2.0 nan nan nan nan nan nan nan"  # a frame the run could not score
+    (tmp_path / "trajectory_gt.txt").write_text("\n".join(lines) + "\n")
+    with pytest.raises(InputError, match=r"map\.pt.*missing"):
+        read_run_trajectories(tmp_path, "map.pt")
+    times, estimated, read_truth = read_run_trajectories(tmp_path)
+    np.testing.assert_array_equal(times, stamps)
+    np.testing.assert_allclose(estimated, poses, atol=1e-9)
+    assert np.isnan(read_truth[2]).all() and np.isfinite(np.delete(read_truth, 2, 0)).all()
