@@ -481,6 +481,11 @@ class TrackingConfig:
     time) and jerks stay within the tracker's reach (docs/tracking.md, "Starting pose")."""
     start_min_matches: int = 20
     """Feature matches that must agree on the starting pose (RANSAC inliers within 3 cm)."""
+    start_alike: int = 3
+    """With ``start: features``: when neither the previous frame's features nor the
+    latest keyframe's give a start, the keyframes (this many) whose images look most
+    like the frame are matched (the recovery's global descriptor), and the one most
+    matches agree on gives it (0: none; docs/tracking.md, "Starting pose")."""
     start_overrule_matches: int = 300
     """With ``start: features``: a start this many matches agree on (0: never) overrules
     the tracker when the map pulls the camera more than ``start_overrule_shift`` from
@@ -512,6 +517,7 @@ class TrackingConfig:
         if self.border < 0:
             raise ValueError(f"border must be >= 0, got {self.border}")
         _at_least(self, "start_min_matches", 6)
+        _at_least(self, "start_alike", 0)
         _at_least(self, "start_overrule_matches", 0)
         _at_least(self, "start_overrule_frames", 1)
         if not self.start_overrule_shift > 0:

@@ -164,7 +164,8 @@ def test_frames_the_map_cannot_confirm_are_carried_by_their_features(
     result = run_slam(config, tmp_path / "run")
     metrics = result.metrics
     assert metrics["tracking_failures"] == 23
-    assert metrics["tracking_starts"] == {"previous_frame": 23, "keyframe": 0, "motion_model": 0}
+    starts = {"previous_frame": 23, "keyframe": 0, "alike_keyframe": 0, "motion_model": 0}
+    assert metrics["tracking_starts"] == starts
     estimate = np.loadtxt(tmp_path / "run" / "trajectory.txt")[:, 1:4]
     truth = np.loadtxt(tmp_path / "run" / "trajectory_gt.txt")[:, 1:4]
     errors = np.linalg.norm(estimate - truth, axis=1)

@@ -1,23 +1,28 @@
-"""A start of image features overrules the tracker when the map pulls the camera far
-from it (``tracking.start_overrule_*``, docs/tracking.md "When the features overrule
-the map"): the rule on its own (matches, shift, frames in a row), and a run on the
-synthetic room with exact ground truth whose tracker is pulled 8 cm off on chosen
-frames: those frames keep their features' pose (within a centimetre of the truth),
-count failed and overruled, and say so in the log; without the rule they land 8 cm
-off (a little less where mapping refines them); a run stopped in the middle of the
-overruled frames resumes to the same poses."""
+"""Starts from image features when the map or the latest images fail them: a start of
+features overrules the tracker when the map pulls the camera far from it
+(``tracking.start_overrule_*``, docs/tracking.md "When the features overrule the map"):
+the rule on its own (matches, shift, frames in a row), and a run on the synthetic room
+with exact ground truth whose tracker is pulled 8 cm off on chosen frames: those frames
+keep their features' pose (within a centimetre of the truth), count failed and
+overruled, and say so in the log; without the rule they land 8 cm off (a little less
+where mapping refines them); a run stopped in the middle of the overruled frames resumes
+to the same poses. And a frame that matches neither the previous frame nor the latest
+keyframe starts from the keyframe that looks alike and most matches agree on
+(``tracking.start_alike``)."""
 
 from __future__ import annotations
 
 import dataclasses
 import json
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 import torch
 
 from eslam.errors import ConfigError
+from eslam.slam.places.index import PlaceMatch
 from eslam.slam.session import run_slam
 from eslam.slam.tracking.base import TrackingQuality, TrackingResult
 from eslam.slam.tracking.feature_start import (
@@ -185,3 +190,52 @@ def test_a_map_that_pulls_the_camera_away_is_overruled_by_the_features(
 def test_bad_overrule_settings_are_refused(room: Path, override: str, message: str) -> None:
     with pytest.raises(ConfigError, match=message):
         demo_config(room, override)
+
+
+class Keyframes:
+    """The keyframe store as the feature start reads it: frame indices by keyframe id."""
+
+    def __init__(self, frames: list[int]) -> None:
+        self.frame_indices = frames
+
+    def __len__(self) -> int:
+        return len(self.frame_indices)
+
+
+class LookAlike:
+    """A place index whose keyframes ``inliers`` agree with the query (None: no pose),
+    ranked alike in ``order``; records the keyframes it was asked to locate."""
+
+    def __init__(self, inliers: dict[int, int | None], order: list[int]) -> None:
+        self.inliers, self.order, self.located = inliers, order, []
+
+    def of(self, store):
+        return self
+
+    def alike(self, query, count: int) -> list[tuple[int, float]]:
+        return [(k, 1.0 - 0.1 * rank) for rank, k in enumerate(self.order[:count])]
+
+    def locate(self, query, k: int, min_inliers: int, seed: int = 0) -> PlaceMatch | None:
+        self.located.append(k)
+        found = self.inliers[k]
+        if found is None or found < min_inliers:
+            return None
+        return PlaceMatch(k, np.eye(4) * (k + 1), found)
+
+
+@pytest.mark.parametrize("alike", [0, 2])
+def test_keyframes_that_look_alike_start_a_frame_the_latest_one_cannot(alike: int) -> None:
+    """Keyframes 0-3 at frames 0, 5, 10, 15; the frame (20) has no previous frame's
+    features kept and matches nothing of the latest keyframe (3); of the two most alike
+    besides it (2 and 0; 1 is third) keyframe 0 has the most agreeing matches."""
+    index = LookAlike({0: 80, 1: 500, 2: 40, 3: None}, order=[3, 2, 0, 1])
+    features = FeatureStart(index, min_matches=20, alike=alike)  # type: ignore[arg-type]
+    state = SimpleNamespace(next_frame=20, components={}, keyframes=Keyframes([0, 5, 10, 15]))
+    found = features.matched(query=None, state=state)  # type: ignore[arg-type]
+    if alike == 0:
+        assert found is None and index.located == [3]
+        return
+    assert index.located == [3, 2, 0]  # the latest first, then the alike ones but it
+    assert found is not None
+    assert (found.reference, found.inliers, found.source) == (0, 80, "alike_keyframe")
+    assert torch.equal(found.pose, torch.from_numpy(np.eye(4)))

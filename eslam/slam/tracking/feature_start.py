@@ -12,7 +12,9 @@ whose pose the run has: the previous frame when it was tracked, or when it faile
 its own start came from features (it keeps that pose: the features carry the camera
 from frame to frame while the map cannot confirm it, instead of holding it still),
 else the latest keyframe (:class:`~eslam.slam.places.index.PlaceIndex`, shared with the
-recovery's relocalisation; also when the previous frame gives no pose). A rigid motion
+recovery's relocalisation; also when the previous frame gives no pose), else the
+``start_alike`` keyframes whose images look most like the frame (the index's global
+descriptor; the one most matches agree on). A rigid motion
 fitted in RANSAC to the matched features' depth points
 (:func:`~eslam.slam.places.index.pose_from_matches`; the reference's points placed
 with its pose now) gives the starting pose: frame-to-frame visual odometry as a coarse
@@ -58,9 +60,10 @@ metrics.json's ``tracking_overruled``) and how many of the latest frames in a ro
 FEATURES = ("pixels", "descriptors", "points")
 """The fields of :class:`~eslam.slam.places.features.Features` kept, in its order."""
 
-STARTS = ("previous_frame", "keyframe", "motion_model")
+STARTS = ("previous_frame", "keyframe", "alike_keyframe", "motion_model")
 """Where a frame's start came from: features matched to the previous frame's, to the
-latest keyframe's, or (too few agreed) the motion model's guess."""
+latest keyframe's, to those of a keyframe that looks alike, or (too few agreed) the
+motion model's guess."""
 
 
 @dataclass(frozen=True)
@@ -87,11 +90,13 @@ class FeatureStartResult:
         pose: (4, 4) float64 camera-to-world, on the CPU.
         reference: the frame index of the image it was matched to.
         inliers: the matches that agree on it.
+        source: which image that was (:data:`STARTS`, not ``motion_model``).
     """
 
     pose: torch.Tensor
     reference: int
     inliers: int
+    source: str = "previous_frame"
 
 
 class FeatureStart:
@@ -101,14 +106,21 @@ class FeatureStart:
         places: the run's place index.
         min_matches: matches that must agree on the pose (RANSAC inliers within 3 cm).
         overrule: the rule by which a start overrules the tracker (None: never).
+        alike: keyframes that look most like the frame tried after the latest one
+            (``tracking.start_alike``; 0: none).
     """
 
     def __init__(
-        self, places: Places, min_matches: int, overrule: OverruleRule | None = None
+        self,
+        places: Places,
+        min_matches: int,
+        overrule: OverruleRule | None = None,
+        alike: int = 0,
     ) -> None:
         self.places = places
         self.min_matches = min_matches
         self.overrule = overrule
+        self.alike = alike
 
     def describe(self, frame: Frame, state: SLAMState) -> Place:
         """``frame`` as a place (global descriptor and ORB features with depth)."""
@@ -116,17 +128,14 @@ class FeatureStart:
 
     def start(self, query: Place, state: SLAMState) -> FeatureStartResult | None:
         """The next frame's pose from its features ``query`` matched to the previous
-        frame's (when it was tracked), else to the latest keyframe's; None when neither
-        gives ``min_matches`` agreeing matches. Counts where the start came from."""
+        frame's (when it was tracked), else to the latest keyframe's, else to those of
+        the ``alike`` keyframes that look most like it (the one most matches agree on);
+        None when none gives ``min_matches`` agreeing matches. Counts where the start
+        came from."""
         found = self.matched(query, state)
-        if found is None:
-            how = "motion_model"
-        elif found.reference == state.next_frame - 1:
-            how = "previous_frame"
-        else:
-            how = "keyframe"
+        how = "motion_model" if found is None else found.source
         starts = state.component(COMPONENT).setdefault("starts", dict.fromkeys(STARTS, 0))
-        starts[how] += 1
+        starts[how] = starts.get(how, 0) + 1  # a run saved before a source existed lacks it
         return found
 
     def matched(self, query: Place, state: SLAMState) -> FeatureStartResult | None:
@@ -139,18 +148,31 @@ class FeatureStart:
             pose = state.trajectory.poses[index - 1]
             found = pose_from_matches(query.features, reference, pose, self.min_matches, index)
             if found is not None:
-                return FeatureStartResult(torch.from_numpy(found.pose), index - 1, found.inliers)
+                pose = torch.from_numpy(found.pose)
+                return FeatureStartResult(pose, index - 1, found.inliers, "previous_frame")
         store = state.keyframes
         if len(store) == 0:
             return None
         frames = store.frame_indices
+        places = self.places.of(store)
         latest = max(range(len(frames)), key=frames.__getitem__)
-        if tried and frames[latest] == index - 1:
-            return None  # the latest keyframe is the previous frame, matched above
-        match = self.places.of(store).locate(query, latest, self.min_matches, seed=index)
-        if match is None:
+        # unless the latest keyframe is the previous frame, matched above
+        if not (tried and frames[latest] == index - 1):
+            match = places.locate(query, latest, self.min_matches, seed=index)
+            if match is not None:
+                pose = torch.from_numpy(match.pose)
+                return FeatureStartResult(pose, frames[latest], match.inliers, "keyframe")
+        best = None
+        for k, _ in places.alike(query, self.alike + 1) if self.alike else []:
+            if k == latest:
+                continue
+            match = places.locate(query, k, self.min_matches, seed=index)
+            if match is not None and (best is None or match.inliers > best.inliers):
+                best = match
+        if best is None:
             return None
-        return FeatureStartResult(torch.from_numpy(match.pose), frames[latest], match.inliers)
+        pose = torch.from_numpy(best.pose)
+        return FeatureStartResult(pose, frames[best.keyframe], best.inliers, "alike_keyframe")
 
     def overrules(
         self, found: FeatureStartResult, quality: TrackingQuality, state: SLAMState

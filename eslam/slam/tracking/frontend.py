@@ -126,7 +126,7 @@ class TrackingFrontEnd:
                 settings.start_overrule_frames,
             )
         self.feature_start = (
-            FeatureStart(places, settings.start_min_matches, overrule)
+            FeatureStart(places, settings.start_min_matches, overrule, settings.start_alike)
             if settings.start == "features"
             else None
         )
