@@ -159,9 +159,10 @@ class FeatureStart:
         # unless the latest keyframe is the previous frame, matched above
         if not (tried and frames[latest] == index - 1):
             match = places.locate(query, latest, self.min_matches, seed=index)
-            if match is not None:
-                pose = torch.from_numpy(match.pose)
-                return FeatureStartResult(pose, frames[latest], match.inliers, "keyframe")
+            if match is not None:  # counted as the previous frame's when it is that frame
+                pose, reference = torch.from_numpy(match.pose), frames[latest]
+                source = "previous_frame" if reference == index - 1 else "keyframe"
+                return FeatureStartResult(pose, reference, match.inliers, source)
         best = None
         for k, _ in places.alike(query, self.alike + 1) if self.alike else []:
             if k == latest:
