@@ -8,7 +8,8 @@ the tracker (``tracking_overruled``: the frame kept the features' pose; docs/tra
 "When the features overrule the map"). Against the ground truth this prints, per run,
 the frames the rule's thresholds pick (at least ``--matches`` matches, moved more than
 ``--shift``) and the error of the step into each (the RPE of the pair (i - 1, i), mm):
-with the rule off these are the map's poses, with it on the features'.
+with the rule off these are the map's poses, with it on the features'; beside each,
+the shift and the share of its points that fit the map.
 
     python benchmarks/start_shift.py RUN_DIR [RUN_DIR ...] [--matches 300] [--shift 0.05]
 
@@ -41,6 +42,8 @@ class ShiftReport:
         picked: frames over both thresholds (index in the run).
         overruled: of ``picked``, those the start overruled.
         step_mm: the error of the step into each frame of ``picked``, mm.
+        picked_shift_mm: how far the tracker moved each of them from its start, mm.
+        picked_inliers: the share of each one's points that fit the map.
         other_step_mm: the median step error of the other frames from features, mm.
     """
 
@@ -50,6 +53,8 @@ class ShiftReport:
     picked: list[int]
     overruled: list[int]
     step_mm: list[float]
+    picked_shift_mm: list[float]
+    picked_inliers: list[float]
     other_step_mm: float
 
 
@@ -61,7 +66,12 @@ def shift_report(
     n = len(estimated)
     column = {
         key: np.array([np.nan if v is None else v for v in timings[key][:n]], dtype=np.float64)
-        for key in ("tracking_start_matches", "tracking_start_shift_m", "tracking_overruled")
+        for key in (
+            "tracking_start_matches",
+            "tracking_start_shift_m",
+            "tracking_overruled",
+            "tracking_inlier_fraction",
+        )
     }
     agreed, moved = column["tracking_start_matches"], column["tracking_start_shift_m"]
     from_features = np.isfinite(moved)
@@ -78,6 +88,8 @@ def shift_report(
         picked=[int(i) for i in chosen],
         overruled=[int(i) for i in chosen if column["tracking_overruled"][i] == 1],
         step_mm=[float(steps[i]) for i in chosen],
+        picked_shift_mm=[float(1000 * moved[i]) for i in chosen],
+        picked_inliers=[float(column["tracking_inlier_fraction"][i]) for i in chosen],
         other_step_mm=float(np.nanmedian(steps[other])) if other.any() else float("nan"),
     )
 
@@ -99,8 +111,11 @@ def run_row(run: Path, matches: int, shift: float) -> str:
     """The markdown row of the run in ``run``."""
     r = shift_report(*read_run(run), matches, shift)
     steps = ", ".join(
-        f"{i}{'*' if i in r.overruled else ''}: {step:.0f}"
-        for i, step in zip(r.picked, r.step_mm, strict=True)
+        f"{i}{'*' if i in r.overruled else ''}: {step:.0f} "
+        f"({moved / 10:.1f} cm, {100 * share:.0f} %)"
+        for i, step, moved, share in zip(
+            r.picked, r.step_mm, r.picked_shift_mm, r.picked_inliers, strict=True
+        )
     )
     return (
         f"| {run} | {r.ate_cm:.2f} cm | {r.from_features} | "
@@ -118,7 +133,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     print(
         "| run | ATE | frames from features | shift median / 99 % / largest "
-        "| frames over both thresholds | their step error, mm (* overruled) "
+        "| frames over both thresholds | their step error, mm (* overruled; the shift, inliers) "
         "| other frames' step error, median |"
     )
     print("|---|---:|---:|---:|---:|---|---:|")

@@ -35,6 +35,7 @@ def _timings(count: int) -> dict:
         "tracking_start_matches": matches,
         "tracking_start_shift_m": shifts,
         "tracking_overruled": overruled,
+        "tracking_inlier_fraction": [None] + [0.8] * (count - 1),
     }
 
 
@@ -46,6 +47,8 @@ def test_the_frames_over_both_thresholds_and_their_steps() -> None:
     report = script.shift_report(estimated, truth, _timings(8), matches=300, shift=0.05)
     assert report.picked == [3, 6] and report.overruled == [3]
     assert report.step_mm == pytest.approx([0.0, 70.0], abs=1e-6)
+    assert report.picked_shift_mm == pytest.approx([80.0, 70.0])
+    assert report.picked_inliers == pytest.approx([0.8, 0.8])
     assert report.from_features == 7
     assert report.shift_mm[2] == pytest.approx(90.0)
     assert report.other_step_mm == pytest.approx(0.0, abs=1e-6)
@@ -59,7 +62,9 @@ def test_a_run_prints_one_row(tmp_path: Path, capsys) -> None:
     write_tum_trajectory(tmp_path / "trajectory_gt.txt", stamps, truth)
     (tmp_path / "timings.json").write_text(json.dumps(_timings(8)))
     assert script.main([str(tmp_path)]) == 0
-    assert "| 2 (1 overruled) | 3*: 0, 6: 0 |" in capsys.readouterr().out
+    assert (
+        "| 2 (1 overruled) | 3*: 0 (8.0 cm, 80 %), 6: 0 (7.0 cm, 80 %) |" in capsys.readouterr().out
+    )
 
 
 def test_a_run_without_starts_from_features_is_one_line_and_status_2(

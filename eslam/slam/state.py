@@ -171,6 +171,7 @@ _FAILED = TRACKING_COLUMNS.index("tracking_failed")
 _RECOVERY = TRACKING_COLUMNS.index("tracking_recovery")
 _RECOVERED_FROM = TRACKING_COLUMNS.index("tracking_recovered_from")
 _DEGENERATE = TRACKING_COLUMNS.index("tracking_degenerate_directions")
+_OVERRULED = TRACKING_COLUMNS.index("tracking_overruled")
 
 
 def failed_row(row: list[float]) -> bool:
@@ -214,6 +215,17 @@ def _trailing(rows: list[list[float]], test: Callable[[list[float]], bool]) -> i
 def failed_stretch(rows: list[list[float]]) -> int:
     """How many of the last ``rows`` are failed frames: how long the camera is lost."""
     return _trailing(rows, failed_row)
+
+
+def overruled_row(row: list[float]) -> bool:
+    """Whether a quality row is a frame whose start of features overruled the tracker
+    (NaN, in a map saved before the column existed, is not)."""
+    return row[_OVERRULED] == 1
+
+
+def overruled_stretch(rows: list[list[float]]) -> int:
+    """How many of the last ``rows`` are overruled frames, in a row."""
+    return _trailing(rows, overruled_row)
 
 
 def longest_failed_run(rows: list[list[float]]) -> int:

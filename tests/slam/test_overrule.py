@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+from dataclasses import replace
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -24,9 +25,9 @@ import torch
 from eslam.errors import ConfigError
 from eslam.slam.places.index import PlaceMatch
 from eslam.slam.session import run_slam
+from eslam.slam.state import quality_row
 from eslam.slam.tracking.base import TrackingQuality, TrackingResult
 from eslam.slam.tracking.feature_start import (
-    COMPONENT,
     FeatureStart,
     FeatureStartResult,
     OverruleRule,
@@ -40,14 +41,12 @@ from tests.conftest import demo_config
 RULE = OverruleRule(matches=100, shift=0.05, frames=2)
 
 
-class ComponentState:
-    """What :meth:`FeatureStart.overrules` reads and writes of the run's state."""
-
-    def __init__(self) -> None:
-        self.components: dict[str, dict] = {}
-
-    def component(self, name: str) -> dict:
-        return self.components.setdefault(name, {})
+def rows(*overruled: bool) -> SimpleNamespace:
+    """A run's state as the rule reads it: quality rows, the frames overruled or not."""
+    quality = TrackingQuality(10, 0.8, 0.004, failed=False)
+    return SimpleNamespace(
+        tracking_quality=[quality_row(replace(quality, overruled=o)) for o in overruled]
+    )
 
 
 def start(inliers: int) -> FeatureStartResult:
@@ -68,28 +67,26 @@ def test_the_shift_is_the_distance_between_camera_centres() -> None:
 
 def test_the_rule_needs_matches_a_shift_and_a_passed_frame() -> None:
     features = FeatureStart(places=None, min_matches=20, overrule=RULE)  # type: ignore[arg-type]
-    state = ComponentState()
+    state = rows(False)
     assert features.overrules(start(150), passed(0.06), state)
-    assert state.components[COMPONENT]["overruled"] == 1
     for found, quality in [
         (start(150), passed(0.04)),  # moved less than the shift
         (start(99), passed(0.06)),  # too few matches agree
         (start(150), dataclasses.replace(passed(None), failed=True)),  # the tracker failed
     ]:
         assert not features.overrules(found, quality, state)
-        assert state.components[COMPONENT]["overruled_streak"] == 0
-    assert state.components[COMPONENT]["overruled"] == 1
     never = FeatureStart(places=None, min_matches=20)  # type: ignore[arg-type]
-    assert not never.overrules(start(150), passed(0.06), ComponentState())
+    assert not never.overrules(start(150), passed(0.06), state)
 
 
 def test_the_features_overrule_at_most_frames_in_a_row() -> None:
     features = FeatureStart(places=None, min_matches=20, overrule=RULE)  # type: ignore[arg-type]
-    state = ComponentState()
-    fired = [features.overrules(start(150), passed(0.06), state) for _ in range(5)]
-    # two in a row, then the map's pose is taken once, and the count starts again
-    assert fired == [True, True, False, True, True]
-    assert state.components[COMPONENT]["overruled"] == 4
+    # frames in a row overruled just before (the quality rows): two are allowed
+    fired = [
+        features.overrules(start(150), passed(0.06), before)
+        for before in (rows(), rows(True), rows(True, True), rows(True, True, False))
+    ]
+    assert fired == [True, True, False, True]
 
 
 ROOM = SynthConfig(

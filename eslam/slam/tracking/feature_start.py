@@ -45,7 +45,7 @@ import torch
 
 from eslam.slam.places.features import Features
 from eslam.slam.places.index import Place, Places, describe, pose_from_matches
-from eslam.slam.state import SLAMState
+from eslam.slam.state import SLAMState, overruled_row, overruled_stretch
 from eslam.slam.tracking.base import TrackingQuality
 from eslam.types import Frame
 
@@ -53,9 +53,7 @@ COMPONENT = "feature_start"
 """The key of this component's state in ``state.components``: the last tracked
 frame's index and its features (``frame`` and :data:`FEATURES`), how many
 frames started from where (``starts``: :data:`STARTS` -> count; metrics.json's
-``tracking_starts``), how many frames the features overruled (``overruled``;
-metrics.json's ``tracking_overruled``) and how many of the latest frames in a row
-(``overruled_streak``)."""
+``tracking_starts``). The overruled frames are read from the run's quality rows."""
 
 FEATURES = ("pixels", "descriptors", "points")
 """The fields of :class:`~eslam.slam.places.features.Features` kept, in its order."""
@@ -181,24 +179,18 @@ class FeatureStart:
         """Whether the start ``found`` overrules the tracker's answer, judged
         ``quality`` with its ``start_shift_m`` (the module doc's rule: a passed frame
         whose start ``overrule.matches`` agree on, moved more than ``overrule.shift``,
-        fewer than ``overrule.frames`` frames in a row before it). Called once per
-        frame tracked from features: counts the overruled frames and the streak."""
-        entry = state.component(COMPONENT)
-        streak = int(entry.get("overruled_streak", 0))
+        fewer than ``overrule.frames`` frames in a row before it, read from the run's
+        quality rows)."""
         rule = self.overrule
         shift = quality.start_shift_m
-        overrule = (
+        return (
             rule is not None
             and not quality.failed
             and shift is not None
             and found.inliers >= rule.matches
             and shift > rule.shift
-            and streak < rule.frames
+            and overruled_stretch(state.tracking_quality) < rule.frames
         )
-        entry["overruled_streak"] = streak + 1 if overrule else 0
-        if overrule:
-            entry["overruled"] = int(entry.get("overruled", 0)) + 1
-        return overrule
 
     def remember(self, query: Place, state: SLAMState) -> None:
         """Keep ``query``, the features of the frame just tracked (or failed with its
@@ -224,8 +216,8 @@ def start_metrics(state: SLAMState) -> dict:
     """metrics.json's ``tracking_starts`` (frames by where their start came from,
     :data:`STARTS`) and ``tracking_overruled`` (frames whose features overruled the
     tracker) when the run starts frames from features, else nothing."""
-    entry = state.components.get(COMPONENT, {})
-    starts = entry.get("starts")
+    starts = state.components.get(COMPONENT, {}).get("starts")
     if starts is None:
         return {}
-    return {"tracking_starts": dict(starts), "tracking_overruled": int(entry.get("overruled", 0))}
+    overruled = sum(map(overruled_row, state.tracking_quality))
+    return {"tracking_starts": dict(starts), "tracking_overruled": overruled}
