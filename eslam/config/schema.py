@@ -486,6 +486,12 @@ class TrackingConfig:
     latest keyframe's give a start, the keyframes (this many) whose images look most
     like the frame are matched (the recovery's global descriptor), and the one most
     matches agree on gives it (0: none; docs/tracking.md, "Starting pose")."""
+    start_coarse: int = 500
+    """With ``start: features``: this many of the frame's features (spread over its
+    list) are matched to all of the previous frame's (or the latest keyframe's) first,
+    and the rough pose they give guides the matching of the rest, each to the features
+    within 3 cm of where that pose puts it; all are matched with all when that gives no
+    start. 0: all with all at once (docs/tracking.md, "Starting pose")."""
     start_overrule_matches: int = 300
     """With ``start: features``: a start this many matches agree on (0: never) overrules
     the tracker when the map pulls the camera more than ``start_overrule_shift`` from
@@ -518,6 +524,7 @@ class TrackingConfig:
             raise ValueError(f"border must be >= 0, got {self.border}")
         _at_least(self, "start_min_matches", 6)
         _at_least(self, "start_alike", 0)
+        _at_least(self, "start_coarse", 0)
         _at_least(self, "start_overrule_matches", 0)
         _at_least(self, "start_overrule_frames", 1)
         if not self.start_overrule_shift > 0:

@@ -212,7 +212,9 @@ class LookAlike:
     def alike(self, query, count: int) -> list[tuple[int, float]]:
         return [(k, 1.0 - 0.1 * rank) for rank, k in enumerate(self.order[:count])]
 
-    def locate(self, query, k: int, min_inliers: int, seed: int = 0) -> PlaceMatch | None:
+    def locate(
+        self, query, k: int, min_inliers: int, seed: int = 0, coarse: int = 0
+    ) -> PlaceMatch | None:
         self.located.append(k)
         found = self.inliers[k]
         if found is None or found < min_inliers:

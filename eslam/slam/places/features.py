@@ -9,7 +9,9 @@ features with their depth, matching, and a camera pose from matches.
   It needs no vocabulary trained beforehand and costs microseconds per keyframe; it
   ranks keyframes, it does not decide: the matches and the map do.
 - Local features are ORB (Rublee et al., ICCV 2011; ``cv2.ORB_create``), matched by
-  Hamming distance with Lowe's ratio test (IJCV 2004) and kept where both ways agree.
+  Hamming distance with Lowe's ratio test (IJCV 2004) and kept where both ways agree;
+  given a rough pose, among the features near where it puts each one only
+  (:func:`guided_matches`).
   How many, and how faint a corner may be (``tracking.features``), decide whether a
   blurred frame (a fast turn) keeps enough of them to match.
 - A pose from matches: the keyframe's features with depth give world points, the
@@ -25,6 +27,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
 from eslam.config.schema import FeaturesConfig
@@ -44,6 +47,10 @@ RATIO = 0.8
 
 INLIER_M = 0.03
 """Distance (metres) within which a match agrees with a rigid pose."""
+
+UNRELATED_BITS = 128
+"""Bits two unrelated ORB descriptors differ in, about half of 256: the second nearest a
+guided search holds a descriptor with one candidate to (:func:`guided_matches`)."""
 
 RANSAC_ITERATIONS = 200
 """Three-point samples tried per pose."""
@@ -144,21 +151,80 @@ def mutual_matches(a: np.ndarray, b: np.ndarray, ratio: float = RATIO) -> np.nda
     return np.array(pairs, dtype=np.int64).reshape(-1, 2)
 
 
-def mutual_matches_reference(a: np.ndarray, b: np.ndarray, ratio: float = RATIO) -> np.ndarray:
+def mutual_matches_reference(
+    a: np.ndarray, b: np.ndarray, ratio: float = RATIO, allowed: np.ndarray | None = None
+) -> np.ndarray:
     """:func:`mutual_matches` written out on the whole Hamming distance matrix (slow, and
     N x M x 256 bytes of memory: for tests, which hold the two equal): a's nearest and
     second nearest in b by distance, then index (the lowest index wins a tie, as
-    OpenCV's brute-force matcher keeps it), the ratio test, and b's nearest in a."""
+    OpenCV's brute-force matcher keeps it), the ratio test, and b's nearest in a.
+    ``allowed`` (N, M) bool: only those pairs are compared (:func:`guided_matches`);
+    a descriptor of ``a`` with one allowed is held to :data:`UNRELATED_BITS` as its
+    second nearest, and one with none has no match."""
     if len(a) < 2 or len(b) < 2:
         return np.zeros((0, 2), np.int64)
     bits = np.unpackbits(a[:, None, :] ^ b[None, :, :], axis=2)
     distance = bits.sum(axis=2, dtype=np.int64)
+    allowed = np.ones(distance.shape, bool) if allowed is None else allowed
+    distance = np.where(allowed, distance, np.iinfo(np.int64).max)
     order = np.argsort(distance, axis=1, kind="stable")
     rows = np.arange(len(a))
     best, second = distance[rows, order[:, 0]], distance[rows, order[:, 1]]
     back = np.argmin(distance, axis=0)
-    keep = (best < ratio * second) & (back[order[:, 0]] == rows)
+    candidates = allowed.sum(axis=1)
+    second = np.where(candidates == 1, UNRELATED_BITS, second)
+    keep = (candidates >= 1) & (best < ratio * second) & (back[order[:, 0]] == rows)
     return np.stack([rows[keep], order[keep, 0]], axis=1).astype(np.int64)
+
+
+def within(points_a: np.ndarray, points_b: np.ndarray, radius: float) -> np.ndarray:
+    """(N, M) bool: whether the (N, 3) and (M, 3) points (NaN: none) lie within
+    ``radius`` of each other: the pairs :func:`guided_matches` compares."""
+    gap = np.linalg.norm(points_a[:, None, :] - points_b[None, :, :], axis=2)
+    return np.nan_to_num(gap, nan=np.inf) <= radius
+
+
+def guided_matches(
+    a: np.ndarray,
+    points_a: np.ndarray,
+    b: np.ndarray,
+    points_b: np.ndarray,
+    radius: float,
+    ratio: float = RATIO,
+) -> np.ndarray:
+    """(M, 2) index pairs as :func:`mutual_matches` finds them, each descriptor compared
+    only with those whose point lies within ``radius`` of its own, both sets of (N, 3)
+    points placed in one frame by a pose known roughly (NaN: no depth, no match): a
+    guided search (ORB-SLAM's search by projection, Mur-Artal et al., T-RO 2015, here
+    in 3D), where each feature meets a handful of others instead of all. The ratio test
+    and the check both ways run among those; a descriptor with one to compare is held
+    to :data:`UNRELATED_BITS` as its second nearest. Equal to
+    :func:`mutual_matches_reference` with ``allowed=within(points_a, points_b, radius)``."""
+    empty = np.zeros((0, 2), np.int64)
+    if len(a) < 2 or len(b) < 2:
+        return empty
+    usable_a = np.nonzero(np.isfinite(points_a).all(axis=1))[0]
+    usable_b = np.nonzero(np.isfinite(points_b).all(axis=1))[0]
+    if len(usable_a) == 0 or len(usable_b) == 0:
+        return empty
+    close = cKDTree(points_a[usable_a]).sparse_distance_matrix(
+        cKDTree(points_b[usable_b]), radius, output_type="ndarray"
+    )
+    rows, cols = usable_a[close["i"]], usable_b[close["j"]]
+    distance = np.bitwise_count(a[rows] ^ b[cols]).sum(axis=1, dtype=np.int64)
+    # by row, then distance, then index (one int64 key: a stable three-key sort's order)
+    order = np.argsort((rows * 257 + distance) * len(b) + cols)
+    rows, cols, distance = rows[order], cols[order], distance[order]
+    first = np.nonzero(np.r_[True, rows[1:] != rows[:-1]])[0]
+    lone = np.r_[first[1:], len(rows)] - first == 1
+    second = np.where(lone, UNRELATED_BITS, distance[np.minimum(first + 1, len(rows) - 1)])
+    passed = first[distance[first] < ratio * second]
+    back = np.argsort((cols * 257 + distance) * len(a) + rows)  # by column, distance, index
+    heads = back[np.r_[True, cols[back][1:] != cols[back][:-1]]]
+    nearest = np.full(len(b), -1, np.int64)
+    nearest[cols[heads]] = rows[heads]
+    keep = passed[nearest[cols[passed]] == rows[passed]]
+    return np.stack([rows[keep], cols[keep]], axis=1).astype(np.int64)
 
 
 @dataclass(frozen=True)

@@ -19,10 +19,14 @@ import torch
 from eslam.config.schema import FeaturesConfig
 from eslam.slam.mapping.keyframes import KeyframeStore
 from eslam.slam.places.features import (
+    INLIER_M,
     Features,
     RigidResult,
+    guided_matches,
     mutual_matches,
     orb_features,
+    residuals,
+    rigid_fit,
     rigid_pose,
     thumbnail,
 )
@@ -97,33 +101,99 @@ class PlaceIndex:
         order = np.argsort(-scores, kind="stable")[:count]
         return [(int(k), float(scores[k])) for k in order]
 
-    def locate(self, query: Place, k: int, min_inliers: int, seed: int = 0) -> PlaceMatch | None:
+    def locate(
+        self, query: Place, k: int, min_inliers: int, seed: int = 0, coarse: int = 0
+    ) -> PlaceMatch | None:
         """Where the query's camera is if it sees keyframe ``k``'s place: its features
         matched to the keyframe's, both with depth (the keyframe's placed with its pose
-        now), give the pose by a rigid fit in RANSAC (:func:`pose_from_matches`); None
-        without ``min_inliers`` agreeing matches."""
+        now), give the pose by a rigid fit in RANSAC (:func:`pose_from_matches`, coarse
+        to fine with ``coarse``); None without ``min_inliers`` agreeing matches."""
         place = self.places()[k]
         pose = self.store.trajectory.poses[self.store.frame_indices[k]]
-        found = pose_from_matches(query.features, place.features, pose, min_inliers, seed)
+        found = pose_from_matches(query.features, place.features, pose, min_inliers, seed, coarse)
         if found is None:
             return None
         return PlaceMatch(k, found.pose, found.inliers)
 
 
 def pose_from_matches(
-    query: Features, reference: Features, pose: torch.Tensor, min_inliers: int, seed: int
+    query: Features,
+    reference: Features,
+    pose: torch.Tensor,
+    min_inliers: int,
+    seed: int,
+    coarse: int = 0,
 ) -> RigidResult | None:
     """The query camera's pose from its features matched to those of a reference image
     whose camera-to-world pose is ``pose`` (4, 4), both with depth: the reference's
     matched points placed in the world, a rigid fit in RANSAC (:func:`rigid_pose`,
-    samples drawn with ``seed``); None without ``min_inliers`` agreeing matches."""
+    samples drawn with ``seed``); None without ``min_inliers`` agreeing matches. With
+    ``coarse`` > 0 and more query features than that, coarse to fine first
+    (:func:`coarse_to_fine`), and all features matched at once only when that gives
+    no pose."""
+    placed = pose.detach().cpu().double().numpy()
+    if 0 < coarse < len(query):
+        found = coarse_to_fine(query, reference, placed, min_inliers, seed, coarse)
+        if found is not None:
+            return found
     pairs = mutual_matches(query.descriptors, reference.descriptors)
+    return _rigid_from_pairs(query, reference, pairs, placed, min_inliers, seed)
+
+
+def coarse_to_fine(
+    query: Features,
+    reference: Features,
+    placed: np.ndarray,
+    min_inliers: int,
+    seed: int,
+    coarse: int,
+    radius: float = INLIER_M,
+) -> RigidResult | None:
+    """:func:`pose_from_matches` in two steps, as ORB-SLAM tracks (a pose, then a
+    search by projection; Mur-Artal et al., T-RO 2015): ``coarse`` of the query's
+    features, evenly spread over its list (ORB lists them by pyramid level), matched
+    to all of the reference's give a rough pose in RANSAC; then every query feature,
+    its point placed by that pose, is matched among the reference's within ``radius``
+    of it (:func:`~eslam.slam.places.features.guided_matches`; 3 cm, the distance
+    within which a match agrees with a pose, :data:`INLIER_M`), and the pose is fitted
+    again twice to the matches within 3 cm of the last one. Each feature meets a
+    handful of others instead of all. None when either step has fewer than
+    ``min_inliers`` agreeing matches."""
+    subset = np.unique(np.linspace(0, len(query) - 1, coarse).round().astype(np.int64))
+    pairs = mutual_matches(query.descriptors[subset], reference.descriptors)
+    pairs[:, 0] = subset[pairs[:, 0]]
+    rough = _rigid_from_pairs(query, reference, pairs, placed, min_inliers, seed)
+    if rough is None:
+        return None
+    world = reference.points @ placed[:3, :3].T + placed[:3, 3]
+    moved = query.points @ rough.pose[:3, :3].T + rough.pose[:3, 3]
+    pairs = guided_matches(query.descriptors, moved, reference.descriptors, world, radius)
+    camera, target = query.points[pairs[:, 0]].astype(np.float64), world[pairs[:, 1]]
+    pose = rough.pose
+    for _ in range(2):
+        agree = residuals(pose, camera, target) < INLIER_M
+        if agree.sum() < max(min_inliers, 3):
+            return None
+        pose = rigid_fit(camera[agree], target[agree])
+    inliers = int((residuals(pose, camera, target) < INLIER_M).sum())
+    return RigidResult(pose, inliers) if inliers >= min_inliers else None
+
+
+def _rigid_from_pairs(
+    query: Features,
+    reference: Features,
+    pairs: np.ndarray,
+    placed: np.ndarray,
+    min_inliers: int,
+    seed: int,
+) -> RigidResult | None:
+    """:func:`rigid_pose` of the matched ``pairs`` with depth on both sides, the
+    reference's points placed in the world by ``placed`` (4, 4)."""
     if len(pairs) == 0:
         return None
     camera = query.points[pairs[:, 0]]
     points = reference.points[pairs[:, 1]]
     usable = np.isfinite(points).all(axis=1) & np.isfinite(camera).all(axis=1)
-    placed = pose.detach().cpu().double().numpy()
     world = points[usable] @ placed[:3, :3].T + placed[:3, 3]
     return rigid_pose(camera[usable].astype(np.float64), world, min_inliers, seed)
 

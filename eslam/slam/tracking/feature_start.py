@@ -18,7 +18,10 @@ descriptor; the one most matches agree on). A rigid motion
 fitted in RANSAC to the matched features' depth points
 (:func:`~eslam.slam.places.index.pose_from_matches`; the reference's points placed
 with its pose now) gives the starting pose: frame-to-frame visual odometry as a coarse
-alignment, the SDF tracker then refining it against the map. A frame with fewer than
+alignment, the SDF tracker then refining it against the map. With the previous frame
+and the latest keyframe the match runs coarse to fine (``start_coarse`` features first,
+the rest guided by their pose; :func:`~eslam.slam.places.index.coarse_to_fine`), with
+the look-alike keyframes (far views) all with all. A frame with fewer than
 ``start_min_matches`` agreeing matches starts from the motion model's guess, as before.
 
 A start that many matches agree on (``start_overrule_matches``) also checks the
@@ -106,6 +109,9 @@ class FeatureStart:
         overrule: the rule by which a start overrules the tracker (None: never).
         alike: keyframes that look most like the frame tried after the latest one
             (``tracking.start_alike``; 0: none).
+        coarse: features of the frame matched to the previous frame's and the latest
+            keyframe's first, for a rough pose that guides the rest
+            (``tracking.start_coarse``; 0: all at once).
     """
 
     def __init__(
@@ -114,11 +120,13 @@ class FeatureStart:
         min_matches: int,
         overrule: OverruleRule | None = None,
         alike: int = 0,
+        coarse: int = 0,
     ) -> None:
         self.places = places
         self.min_matches = min_matches
         self.overrule = overrule
         self.alike = alike
+        self.coarse = coarse
 
     def describe(self, frame: Frame, state: SLAMState) -> Place:
         """``frame`` as a place (global descriptor and ORB features with depth)."""
@@ -144,7 +152,9 @@ class FeatureStart:
         if tried:
             reference = Features(*(previous[key].numpy() for key in FEATURES))
             pose = state.trajectory.poses[index - 1]
-            found = pose_from_matches(query.features, reference, pose, self.min_matches, index)
+            found = pose_from_matches(
+                query.features, reference, pose, self.min_matches, index, self.coarse
+            )
             if found is not None:
                 pose = torch.from_numpy(found.pose)
                 return FeatureStartResult(pose, index - 1, found.inliers, "previous_frame")
@@ -156,7 +166,7 @@ class FeatureStart:
         latest = max(range(len(frames)), key=frames.__getitem__)
         # unless the latest keyframe is the previous frame, matched above
         if not (tried and frames[latest] == index - 1):
-            match = places.locate(query, latest, self.min_matches, seed=index)
+            match = places.locate(query, latest, self.min_matches, index, self.coarse)
             if match is not None:  # counted as the previous frame's when it is that frame
                 pose, reference = torch.from_numpy(match.pose), frames[latest]
                 source = "previous_frame" if reference == index - 1 else "keyframe"

@@ -126,7 +126,13 @@ class TrackingFrontEnd:
                 settings.start_overrule_frames,
             )
         self.feature_start = (
-            FeatureStart(places, settings.start_min_matches, overrule, settings.start_alike)
+            FeatureStart(
+                places,
+                settings.start_min_matches,
+                overrule,
+                settings.start_alike,
+                settings.start_coarse,
+            )
             if settings.start == "features"
             else None
         )
