@@ -9,7 +9,13 @@ import pytest
 import torch
 
 from eslam.config import FieldConfig
-from eslam.field.fused_sampling import FusedPlaneSampling, sample_levels_fused
+from eslam.field.fused_sampling import (
+    FusedPlaneSampling,
+    _plane_gradient_scattered,
+    _plane_gradient_sorted,
+    bilinear_corners,
+    sample_levels_fused,
+)
 from eslam.field.plane_sampling import sample_planes_reference
 from eslam.field.planes import plane_shapes
 from eslam.field.scene_field import SceneField
@@ -160,3 +166,31 @@ def test_backward_is_checked_by_gradcheck_and_refuses_double_backward():
     (gradient,) = torch.autograd.grad(out.sum(), coords, create_graph=True)
     with pytest.raises(RuntimeError):  # no second derivatives: never a silent zero
         gradient.sum().backward()
+
+
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+@pytest.mark.parametrize("grid", [(5, 4, 6), (5, 1, 6)])
+def test_sorted_plane_gradient_equals_the_scattered_one(dtype, grid):
+    """The CPU's sorted sum against the 12 scattered adds (the GPU's path): many points
+    in few cells (long bags), rows nobody reads (empty bags, zero), padding beyond the
+    true plane size, an axis one vertex wide (corners that coincide), no point at all."""
+    generator = torch.Generator().manual_seed(2)
+    shapes = plane_shapes(grid)
+    height = max(h for h, _ in shapes) + 1
+    width = max(w for _, w in shapes) + 2
+    planes = torch.randn(3, 3, height, width, generator=generator, dtype=dtype)
+    planes = planes.contiguous(memory_format=torch.channels_last)
+    spread = torch.rand(40, 3, generator=generator, dtype=dtype) * 2.4 - 1.2
+    crowd = 0.3 + 0.01 * torch.rand(60, 3, generator=generator, dtype=dtype)
+    for coords in (torch.cat((spread, crowd)), spread[:0]):
+        rows, weights, _ = bilinear_corners(coords, shapes, height, width)
+        grad = torch.randn(len(coords), 3, generator=generator, dtype=dtype)
+        sorted_sum = _plane_gradient_sorted(grad, rows, weights, planes)
+        scattered = _plane_gradient_scattered(grad, rows, weights, planes)
+        assert sorted_sum.shape == planes.shape and sorted_sum.stride() == planes.stride()
+        # the same terms summed in another order: float32 rounding only
+        atol = 1e-12 if dtype == torch.float64 else 1e-5
+        torch.testing.assert_close(sorted_sum, scattered, rtol=0, atol=atol)
+        if len(coords):
+            assert sorted_sum.abs().sum() > 0
+            assert torch.all(sorted_sum[:, :, :, shapes[0][1] + 1 :] == 0)  # padding
