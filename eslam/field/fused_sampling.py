@@ -14,7 +14,10 @@ and border clip):
 A level's feature is the sum over its xy, xz and yz planes, so each point reads 12
 rows (3 planes x 4 corners) of the level's (3 H W, C) row table: one
 ``F.embedding_bag`` (mode sum, the bilinear weights as per-sample weights) per level,
-without materialising the (N, 12, C) gathered rows.
+without materialising the (N, 12, C) gathered rows. Levels of one grid and window (a
+field's coarse geometry and appearance planes, both 0.24 m by default) read the same
+rows with the same weights, so they are sampled together: one look-up over their row
+tables side by side, split by channel, and one backward over their channels together.
 
 Backward (hand-written, :class:`FusedPlaneSampling`):
 
@@ -144,7 +147,7 @@ def _bag_layout(count: int, device: torch.device) -> tuple[torch.Tensor, torch.T
 
 
 def _plane_gradient(
-    grad: torch.Tensor, rows: torch.Tensor, weights: torch.Tensor, planes: torch.Tensor
+    grad: torch.Tensor, rows: torch.Tensor, weights: torch.Tensor, layout: tuple[int, int, int]
 ) -> torch.Tensor:
     """dL/dplanes (3, C, H, W) (channels-last strides): sum_{n,k} w_nk g_n into row r_nk.
 
@@ -152,15 +155,15 @@ def _plane_gradient(
     the sorted sum's bag offsets would need a host sync there).
     """
     if grad.device.type == "cpu":
-        return _plane_gradient_sorted(grad, rows, weights, planes)
-    return _plane_gradient_scattered(grad, rows, weights, planes)
+        return _plane_gradient_sorted(grad, rows, weights, layout)
+    return _plane_gradient_scattered(grad, rows, weights, layout)
 
 
 def _plane_gradient_scattered(
-    grad: torch.Tensor, rows: torch.Tensor, weights: torch.Tensor, planes: torch.Tensor
+    grad: torch.Tensor, rows: torch.Tensor, weights: torch.Tensor, layout: tuple[int, int, int]
 ) -> torch.Tensor:
     """:func:`_plane_gradient` as one ``index_add_`` of (N, C) rows per look-up k."""
-    count_planes, channels, height, width = planes.shape
+    (count_planes, height, width), channels = layout, grad.shape[1]
     table = torch.zeros(
         count_planes * height * width, channels, dtype=grad.dtype, device=grad.device
     )
@@ -170,7 +173,7 @@ def _plane_gradient_scattered(
 
 
 def _plane_gradient_sorted(
-    grad: torch.Tensor, rows: torch.Tensor, weights: torch.Tensor, planes: torch.Tensor
+    grad: torch.Tensor, rows: torch.Tensor, weights: torch.Tensor, layout: tuple[int, int, int]
 ) -> torch.Tensor:
     """:func:`_plane_gradient` as one summing ``F.embedding_bag`` over the gradients.
 
@@ -180,7 +183,7 @@ def _plane_gradient_sorted(
     than the 12 scattered adds on the CPU (``benchmarks/plane_gradient.py``;
     docs/benchmarks.md, "Per-iteration timings").
     """
-    count_planes, channels, height, width = planes.shape
+    (count_planes, height, width), channels = layout, grad.shape[1]
     table_rows = count_planes * height * width
     flat = rows.reshape(-1)
     keys = flat.to(torch.int32) if table_rows < 2**31 else flat
@@ -202,9 +205,10 @@ def _coordinate_gradient(
     grad: torch.Tensor,
     rows: torch.Tensor,
     slopes: torch.Tensor,
-    planes: torch.Tensor,
+    table: torch.Tensor,
 ) -> torch.Tensor:
-    """dL/dcoords (N, 3) from the dots d_nk = <P[r_nk], g_n> (module doc).
+    """dL/dcoords (N, 3) from the dots d_nk = <P[r_nk], g_n> (module doc), P the (3 H W,
+    C) row table (:func:`row_table`; levels of one layout side by side: their dots add).
 
     The dots come from aten's embedding_bag per-sample-weight backward: faster on the
     tracking workload (2-core CPU, when it was chosen) than one embedding_bag of the
@@ -215,7 +219,7 @@ def _coordinate_gradient(
     count = grad.shape[0]
     offsets, bag = _bag_layout(count, grad.device)
     dots = torch.ops.aten._embedding_bag_per_sample_weights_backward(
-        grad.contiguous(), row_table(planes), rows.reshape(-1), offsets, bag, EMBEDDING_BAG_SUM
+        grad.contiguous(), table, rows.reshape(-1), offsets, bag, EMBEDDING_BAG_SUM
     ).view(count, 3, CORNERS)
     d00, d01, d10, d11 = dots.unbind(-1)
     fraction, slope = slopes
@@ -249,27 +253,56 @@ def _window_slope(window: Window | None) -> tuple[float, float, float]:
     return tuple(2.0 / (hi - lo) for lo, hi in window)  # type: ignore[return-value]
 
 
+def _layout_groups(shapes, windows, planes) -> tuple[tuple[int, ...], ...]:
+    """Levels that read the same rows with the same weights (equal true shapes, window,
+    padded size and dtype: e.g. the geometry and appearance planes of one resolution),
+    in order of their first level."""
+    groups: dict[tuple, list[int]] = {}
+    for level, (level_shapes, window, level_planes) in enumerate(
+        zip(shapes, windows, planes, strict=True)
+    ):
+        key = (level_shapes, window, level_planes.shape[2:], level_planes.dtype)
+        groups.setdefault(key, []).append(level)
+    return tuple(tuple(group) for group in groups.values())
+
+
+def _group_table(planes: Sequence[torch.Tensor], group: Sequence[int]) -> torch.Tensor:
+    """(3 H W, sum C) the row tables of a group's levels side by side (a view for one)."""
+    if len(group) == 1:
+        return row_table(planes[group[0]])
+    return torch.cat([row_table(planes[level]) for level in group], dim=1)
+
+
 class FusedPlaneSampling(torch.autograd.Function):
     """Sum of the bilinear features of each level's three planes, all levels in one op.
 
     Inputs: the level shapes (a tuple of :data:`PlaneShapes`), the level windows (a
     tuple of :data:`Window` or None), the (N, 3) normalised points, then L plane tensors
     (3, C_l, H_l, W_l). Outputs: L tensors (N, C_l).
+
+    Levels of one layout (:func:`_layout_groups`) share their look-ups: one set of rows
+    and weights, one ``embedding_bag`` over their row tables side by side, one plane
+    gradient and one coordinate gradient over their channels together.
     """
 
     @staticmethod
     def forward(ctx, shapes, windows, points: torch.Tensor, *planes: torch.Tensor):
-        outputs, saved = [], []
-        for level_planes, level_shapes, window in zip(planes, shapes, windows, strict=True):
-            _, _, height, width = level_planes.shape
-            coords = _to_window(points.to(level_planes.dtype), window)
-            rows, weights, slopes = bilinear_corners(coords, level_shapes, height, width)
-            outputs.append(
-                F.embedding_bag(
-                    rows, row_table(level_planes), per_sample_weights=weights, mode="sum"
-                )
+        groups = _layout_groups(shapes, windows, planes)
+        outputs: list[torch.Tensor | None] = [None] * len(planes)
+        saved = []
+        for group in groups:
+            first = planes[group[0]]
+            _, _, height, width = first.shape
+            coords = _to_window(points.to(first.dtype), windows[group[0]])
+            rows, weights, slopes = bilinear_corners(coords, shapes[group[0]], height, width)
+            features = F.embedding_bag(
+                rows, _group_table(planes, group), per_sample_weights=weights, mode="sum"
             )
+            sizes = [planes[level].shape[1] for level in group]
+            for level, part in zip(group, features.split(sizes, dim=1), strict=True):
+                outputs[level] = part
             saved += [rows, weights, slopes]
+        ctx.groups = groups
         ctx.windows = windows
         ctx.points_dtype = points.dtype
         ctx.save_for_backward(*planes, *saved)
@@ -284,15 +317,24 @@ class FusedPlaneSampling(torch.autograd.Function):
         need_points, need_planes = ctx.needs_input_grad[2], ctx.needs_input_grad[3:]
         points_grad = None
         plane_grads: list[torch.Tensor | None] = [None] * levels
-        for level in range(levels):
-            rows, weights, slopes = saved[3 * level : 3 * level + 3]
-            grad = grads[level]
-            if need_planes[level]:
-                plane_grads[level] = _plane_gradient(grad, rows, weights, planes[level])
+        for index, group in enumerate(ctx.groups):
+            rows, weights, slopes = saved[3 * index : 3 * index + 3]
+            grad = (
+                grads[group[0]]
+                if len(group) == 1
+                else torch.cat([grads[level] for level in group], 1)
+            )
+            count_planes, _, height, width = planes[group[0]].shape
+            if any(need_planes[level] for level in group):
+                table = _plane_gradient(grad, rows, weights, (count_planes, height, width))
+                sizes = [planes[level].shape[1] for level in group]
+                for level, part in zip(group, table.split(sizes, dim=1), strict=True):
+                    plane_grads[level] = part if need_planes[level] else None
             if need_points:
-                coords_grad = _coordinate_gradient(grad, rows, slopes, planes[level])
-                if ctx.windows[level] is not None:
-                    slope = _window_slope(ctx.windows[level])
+                coords_grad = _coordinate_gradient(grad, rows, slopes, _group_table(planes, group))
+                window = ctx.windows[group[0]]
+                if window is not None:
+                    slope = _window_slope(window)
                     coords_grad = torch.stack(
                         [coords_grad[:, a] * slope[a] for a in range(3)], dim=-1
                     )

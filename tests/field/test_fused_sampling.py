@@ -11,6 +11,7 @@ import torch
 from eslam.config import FieldConfig
 from eslam.field.fused_sampling import (
     FusedPlaneSampling,
+    _layout_groups,
     _plane_gradient_scattered,
     _plane_gradient_sorted,
     bilinear_corners,
@@ -185,12 +186,48 @@ def test_sorted_plane_gradient_equals_the_scattered_one(dtype, grid):
     for coords in (torch.cat((spread, crowd)), spread[:0]):
         rows, weights, _ = bilinear_corners(coords, shapes, height, width)
         grad = torch.randn(len(coords), 3, generator=generator, dtype=dtype)
-        sorted_sum = _plane_gradient_sorted(grad, rows, weights, planes)
-        scattered = _plane_gradient_scattered(grad, rows, weights, planes)
-        assert sorted_sum.shape == planes.shape and sorted_sum.stride() == planes.stride()
+        layout = (3, height, width)
+        sorted_sum = _plane_gradient_sorted(grad, rows, weights, layout)
+        scattered = _plane_gradient_scattered(grad, rows, weights, layout)
+        assert sorted_sum.shape == planes.shape
         # the same terms summed in another order: float32 rounding only
         atol = 1e-12 if dtype == torch.float64 else 1e-5
         torch.testing.assert_close(sorted_sum, scattered, rtol=0, atol=atol)
         if len(coords):
             assert sorted_sum.abs().sum() > 0
             assert torch.all(sorted_sum[:, :, :, shapes[0][1] + 1 :] == 0)  # padding
+
+
+def test_levels_of_one_layout_share_their_look_ups_and_each_gets_its_own_gradient():
+    """Two levels of one grid and window (a field's coarse geometry and appearance
+    planes) are one group; a level of another window or size is its own. The grouped
+    op's values and gradients equal each level sampled alone."""
+    generator = torch.Generator().manual_seed(4)
+    grid = (4, 3, 5)
+    shapes = (plane_shapes(grid),) * 3 + (plane_shapes((6, 3, 5)),)
+    window = ((-1.2, 0.9), (-1.0, 1.0), (-0.8, 1.3))
+    windows = (None, None, window, None)
+    channels = (2, 3, 2, 2)
+    planes = [
+        torch.randn(3, c, 5, 6, generator=generator, dtype=torch.float64)
+        .contiguous(memory_format=torch.channels_last)
+        .requires_grad_(True)
+        for c in channels
+    ]
+    assert _layout_groups(shapes, windows, planes) == ((0, 1), (2,), (3,))
+    coords = torch.rand(50, 3, generator=generator, dtype=torch.float64) * 2.4 - 1.2
+    coords.requires_grad_(True)
+    outs = sample_levels_fused(coords, planes, shapes, windows)
+    weights = [torch.randn(out.shape, generator=generator, dtype=torch.float64) for out in outs]
+    together = torch.autograd.grad(
+        sum((o * w).sum() for o, w in zip(outs, weights, strict=True)), [coords, *planes]
+    )
+    alone = [torch.zeros_like(t) for t in together]
+    for level in range(4):
+        (out,) = sample_levels_fused(coords, [planes[level]], [shapes[level]], [windows[level]])
+        torch.testing.assert_close(out, outs[level], rtol=0, atol=1e-12)
+        grads = torch.autograd.grad((out * weights[level]).sum(), [coords, planes[level]])
+        alone[0] += grads[0]
+        alone[1 + level] += grads[1]
+    for got, expected in zip(together, alone, strict=True):
+        torch.testing.assert_close(got, expected, rtol=0, atol=1e-12)
