@@ -149,7 +149,8 @@ def _bag_layout(count: int, device: torch.device) -> tuple[torch.Tensor, torch.T
 def _plane_gradient(
     grad: torch.Tensor, rows: torch.Tensor, weights: torch.Tensor, layout: tuple[int, int, int]
 ) -> torch.Tensor:
-    """dL/dplanes (3, C, H, W) (channels-last strides): sum_{n,k} w_nk g_n into row r_nk.
+    """dL/dplanes (3, C, H, W) (channels-last strides): sum_{n,k} w_nk g_n into row r_nk,
+    ``layout`` the (3, H, W) of the padded row table, C the gradients' channels.
 
     The sorted sum on the CPU, the scattered one elsewhere (a GPU adds atomically, and
     the sorted sum's bag offsets would need a host sync there).
@@ -188,7 +189,11 @@ def _plane_gradient_sorted(
     flat = rows.reshape(-1)
     keys = flat.to(torch.int32) if table_rows < 2**31 else flat
     sorted_rows, order = torch.sort(keys, stable=True)
-    counts = torch.bincount(sorted_rows, minlength=table_rows)
+    # the rows' counts by index_add_, not bincount: a size that does not hang on the
+    # data (bincount's does, which torch.compile cannot trace without a guard)
+    counts = torch.zeros(table_rows, dtype=torch.int64, device=grad.device)
+    ones = torch.ones(1, dtype=torch.int64, device=grad.device).expand(flat.numel())
+    counts.index_add_(0, sorted_rows, ones)
     offsets = torch.zeros(table_rows, dtype=torch.int64, device=grad.device)
     torch.cumsum(counts[:-1], 0, out=offsets[1:])
     table = F.embedding_bag(
