@@ -11,11 +11,8 @@ no torch.
 from __future__ import annotations
 
 import os
-import signal
 import sys
-import threading
 from collections.abc import Sequence
-from typing import NoReturn
 
 from eslam import __version__
 from eslam.cli import (
@@ -39,6 +36,7 @@ from eslam.cli.args import (
     Parser,
     settings_epilog,
 )
+from eslam.cli.interrupts import stops_as_interrupt
 from eslam.errors import ESLAMError, output_error
 
 # Idle OpenMP threads sleep instead of spinning (set before anything imports torch): with
@@ -95,9 +93,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         if bad:
             parser.error(f"unrecognized arguments: {' '.join(bad)}")
         args.overrides = [*args.overrides, *extra]
-    previous = _terminate_as_interrupt()
     try:
-        return int(args.handler(args))
+        with stops_as_interrupt():
+            return int(args.handler(args))
     except ESLAMError as error:
         print(f"eslam {args.command}: error: {error}", file=sys.stderr)
         return EXIT_USER_ERROR
@@ -115,9 +113,6 @@ def main(argv: Sequence[str] | None = None) -> int:
             detail = f"interrupted: {detail}"
         print(f"eslam {args.command}: {detail}", file=sys.stderr)
         return EXIT_INTERRUPTED
-    finally:
-        if previous is not None:
-            signal.signal(signal.SIGTERM, previous)
 
 
 def _setting_hint(unknown: Sequence[str], argv: Sequence[str]) -> str | None:
@@ -141,15 +136,3 @@ def _setting_hint(unknown: Sequence[str], argv: Sequence[str]) -> str | None:
                 f"e.g. {settings}"
             )
     return None
-
-
-def _raise_interrupt(signum: int, frame: object) -> NoReturn:
-    raise KeyboardInterrupt
-
-
-def _terminate_as_interrupt():
-    """Make SIGTERM stop a command like Ctrl-C (runs save their frames); return the old
-    handler, or None where signals cannot be set (not the main thread)."""
-    if threading.current_thread() is not threading.main_thread():
-        return None
-    return signal.signal(signal.SIGTERM, _raise_interrupt)
