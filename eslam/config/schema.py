@@ -503,6 +503,12 @@ class TrackingConfig:
     start_overrule_frames: int = 3
     """The most frames in a row the features overrule; the next one takes the map's
     pose (features alone drift: the map must get the camera back)."""
+    keyframe_offset: bool = False
+    """After each mapping call, track its newest keyframe again on the new map and move
+    every frame tracked until the next call by the offset from that pose to the one the
+    call gave the keyframe: the frames follow the mapper's estimate instead of leaving a
+    step at each keyframe (one tracking more per call; docs/tracking.md, "Keyframe
+    offset")."""
     features: FeaturesConfig = field(default_factory=FeaturesConfig)
     """The ORB features the starting pose, relocalisation and loop closure match."""
     observed_only: bool = False

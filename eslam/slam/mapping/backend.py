@@ -54,6 +54,7 @@ from eslam.slam.mapping.mapper import (
 from eslam.slam.run.observers import MappingDone, MappingStep
 from eslam.slam.state import FrameMark, SLAMState, new_field
 from eslam.slam.tracking.frontend import TrackedFrame
+from eslam.slam.tracking.keyframe_offset import MAPPED
 from eslam.slam.views import View
 from eslam.types import Frame
 
@@ -299,6 +300,7 @@ class KeyframeBackEnd:
             state.trajectory.set_poses(frames, result.poses[moved])
             if self.context.config.mapping.carry_frames:
                 self._carry(state, frames, before)
+        state.component("back_end")[MAPPED] = job.index  # the front end's keyframe offset
         self.context.observers.on_mapping(
             MappingDone(job.index, job.window, job.schedule.iterations, result.loss)
         )

@@ -50,6 +50,7 @@ from eslam.slam.state import (
 )
 from eslam.slam.tracking.base import RECOVERIES
 from eslam.slam.tracking.feature_start import start_metrics
+from eslam.slam.tracking.keyframe_offset import offset_metrics
 
 
 @dataclass(frozen=True)
@@ -150,6 +151,7 @@ def run_metrics(state: SLAMState, device: str, peak_memory_mb: float) -> dict:
         metrics.update(recovery_metrics(state.tracking_quality))
     metrics.update(loop_metrics(state))
     metrics.update(start_metrics(state))
+    metrics.update(offset_metrics(state))
     if np.isfinite(quality["tracking_degenerate_directions"]).any():  # the test ran
         metrics["tracking_degenerate_frames"] = sum(map(degenerate_row, state.tracking_quality))
     gt = state.trajectory.gt_poses()

@@ -14,13 +14,17 @@ short of the recovery's inlier share) goes to the recovery
 (:mod:`eslam.slam.tracking.recovery`: other starting poses, relocalisation),
 and keeps the guess when nothing passes; a failed frame whose start came from its
 features keeps that pose and, in real time, skips the recovery
-(``tracking.recovery.carried``). The run loop appends the answer, a
+(``tracking.recovery.carried``). With ``tracking.keyframe_offset`` the tracker's pose
+of a frame it passed is moved into the mapper's frame
+(:mod:`eslam.slam.tracking.keyframe_offset`: the offset is measured by tracking the
+newest mapped keyframe again after each mapping call). The run loop appends the answer, a
 :class:`TrackedFrame`, to the trajectory; observers report it.
 
 The front end keeps no state of its own between frames outside the run's state:
 whether the last two frames failed or the last was recovered (then the motion model
 holds still) is read from the run's quality rows, and the feature start's reference
-features are its entry in ``state.components``; both are checkpointed, so a run
+features and the keyframe offset are their entries in ``state.components``; all are
+checkpointed, so a run
 resumed right after any frame starts its next frame exactly as the uninterrupted run
 does.
 """
@@ -40,6 +44,7 @@ from eslam.slam.places.index import Places
 from eslam.slam.state import SLAMState, failed_row, recovery_of
 from eslam.slam.tracking.base import Tracker, TrackingQuality, judged
 from eslam.slam.tracking.feature_start import FeatureStart, OverruleRule, start_shift
+from eslam.slam.tracking.keyframe_offset import KeyframeOffset
 from eslam.slam.tracking.recovery import Recovery
 from eslam.slam.tracking.trackers import make_tracker, motion_guess
 from eslam.slam.tracking.view_filters import ViewFilter, make_filters
@@ -136,6 +141,11 @@ class TrackingFrontEnd:
             if settings.start == "features"
             else None
         )
+        self.offset = (
+            KeyframeOffset(context, self.tracker, self.restricted)
+            if settings.keyframe_offset
+            else None
+        )
 
     @property
     def log(self) -> logging.Logger:
@@ -155,17 +165,15 @@ class TrackingFrontEnd:
             started = self.feature_start.start(query, state)
             if started is not None:
                 guess = started.pose.to(guess)
-        whole = view = self.view(frame)
+        whole = self.view(frame)
         kept: dict[str, float] = {}
-        for view_filter in self.filters:
-            restricted = restrict_view(view, view_filter.keep(view, guess, state))
-            left, before = restricted.sampleable_pixels(), view.sampleable_pixels()
-            kept[view_filter.name] = left / max(before, 1)
-            if left == 0 and before > 0:
-                return TrackedFrame(guess, has_depth, emptied_by=view_filter.emptied, kept=kept)
-            view = restricted
+        view, emptied_by = self.filtered(whole, guess, state, kept)
+        if emptied_by is not None:
+            return TrackedFrame(guess, has_depth, emptied_by=emptied_by, kept=kept)
         if view.sampleable_pixels() == 0:
             return TrackedFrame(guess, has_depth)
+        if self.offset is not None:
+            self.offset.update(state)
         result = self.tracker.track(state.field, view, guess, state.generator)
         pose, quality = judged(result, guess)
         if self.feature_start is not None and started is not None and quality is not None:
@@ -183,12 +191,38 @@ class TrackingFrontEnd:
                 found = recovery.recover(frame, whole, guess, state, query)
                 if found is not None:
                     pose, quality = found.pose, found.quality
+        if self.offset is not None and not (quality is not None and quality.failed):
+            pose = self.offset.apply(pose, state)  # the tracker's pose in the mapper's frame
         if self.feature_start is not None and query is not None:
             # a failed frame keeps its features' pose: the next frame starts from it
             # (visual odometry while the map cannot confirm), not from an older keyframe
             if quality is None or not quality.failed or started is not None:
                 self.feature_start.remember(query, state)
         return TrackedFrame(pose, has_depth, True, quality, kept=kept)
+
+    def filtered(
+        self,
+        view: View,
+        guess: torch.Tensor,
+        state: SLAMState,
+        kept: dict[str, float] | None = None,
+    ) -> tuple[View, str | None]:
+        """``view`` restricted by the view filters at ``guess``, and why a filter left no
+        pixel (its words), else None; ``kept`` receives each filter's share of pixels."""
+        for view_filter in self.filters:
+            restricted = restrict_view(view, view_filter.keep(view, guess, state))
+            left, before = restricted.sampleable_pixels(), view.sampleable_pixels()
+            if kept is not None:
+                kept[view_filter.name] = left / max(before, 1)
+            if left == 0 and before > 0:
+                return restricted, view_filter.emptied
+            view = restricted
+        return view, None
+
+    def restricted(self, view: View, pose: torch.Tensor, state: SLAMState) -> View | None:
+        """:meth:`filtered`'s view, None when it leaves no pixel to track on."""
+        view, emptied_by = self.filtered(view, pose, state)
+        return None if emptied_by is not None or view.sampleable_pixels() == 0 else view
 
     def guess(self, state: SLAMState) -> torch.Tensor:
         """The motion model's pose for the next frame of ``state``
