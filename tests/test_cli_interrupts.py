@@ -41,15 +41,20 @@ _SCRIPT = textwrap.dedent(
 )
 
 
-@pytest.mark.skipif(sys.platform == "win32", reason="POSIX signals")
-def test_a_sigterm_swallowed_by_a_callback_still_stops_the_command() -> None:
-    done = subprocess.run(
-        [sys.executable, "-c", _SCRIPT],
+def _python(code: str) -> subprocess.CompletedProcess:
+    """``code`` run by this Python in the repository root."""
+    return subprocess.run(
+        [sys.executable, "-c", code],
         capture_output=True,
         text=True,
         timeout=60,
         cwd=Path(__file__).resolve().parents[1],
     )
+
+
+@pytest.mark.skipif(sys.platform == "win32", reason="POSIX signals")
+def test_a_sigterm_swallowed_by_a_callback_still_stops_the_command() -> None:
+    done = _python(_SCRIPT)
     assert done.returncode == 0, done.stderr
     outcome, restored = done.stdout.split("\n")[:2]
     assert outcome == "interrupted"
@@ -77,12 +82,6 @@ def test_other_unraisable_errors_are_still_reported() -> None:
         print("went on")
         """
     )
-    done = subprocess.run(
-        [sys.executable, "-c", code],
-        capture_output=True,
-        text=True,
-        timeout=60,
-        cwd=Path(__file__).resolve().parents[1],
-    )
+    done = _python(code)
     assert done.stdout.strip() == "went on"
     assert "ValueError: a callback's own error" in done.stderr
