@@ -71,6 +71,8 @@ class KeyframeOffset:
         self.context = context
         self.tracker = tracker
         self.restrict = restrict
+        # D on the device, built once per measurement: no host-to-device copy per frame
+        self._device_offset: tuple[tuple, torch.Tensor] | None = None
 
     def update(self, state: SLAMState) -> None:
         """Measure the offset on the newest mapped keyframe when a call completed since
@@ -111,10 +113,15 @@ class KeyframeOffset:
 
     def apply(self, pose: torch.Tensor, state: SLAMState) -> torch.Tensor:
         """The tracker's ``pose`` of a frame in the mapper's frame: D ``pose``."""
-        offset = state.component(COMPONENT).get("offset")
+        own = state.component(COMPONENT)
+        offset = own.get("offset")
         if offset is None:
             return pose
-        return torch.tensor(offset, dtype=torch.float64).reshape(4, 4).to(pose) @ pose
+        key = (own.get("keyframe"), own.get("measured"), pose.device, pose.dtype)
+        if self._device_offset is None or self._device_offset[0] != key:
+            matrix = torch.tensor(offset, dtype=torch.float64).reshape(4, 4).to(pose)
+            self._device_offset = (key, matrix)
+        return self._device_offset[1] @ pose
 
 
 def offset_metrics(state: SLAMState) -> dict:
