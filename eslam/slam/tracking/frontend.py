@@ -17,16 +17,15 @@ features keeps that pose and, in real time, skips the recovery
 (``tracking.recovery.carried``). With ``tracking.keyframe_offset`` the tracker's pose
 of a frame it passed is moved into the mapper's frame
 (:mod:`eslam.slam.tracking.keyframe_offset`: the offset is measured by tracking the
-newest mapped keyframe again after each mapping call). The run loop appends the answer, a
-:class:`TrackedFrame`, to the trajectory; observers report it.
+newest mapped keyframe again after each mapping call). The run loop appends the
+answer, a :class:`TrackedFrame`, to the trajectory; observers report it.
 
 The front end keeps no state of its own between frames outside the run's state:
 whether the last two frames failed or the last was recovered (then the motion model
 holds still) is read from the run's quality rows, and the feature start's reference
 features and the keyframe offset are their entries in ``state.components``; all are
-checkpointed, so a run
-resumed right after any frame starts its next frame exactly as the uninterrupted run
-does.
+checkpointed, so a run resumed right after any frame starts its next frame exactly as
+the uninterrupted run does.
 """
 
 from __future__ import annotations
