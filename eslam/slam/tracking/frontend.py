@@ -141,7 +141,7 @@ class TrackingFrontEnd:
             else None
         )
         self.offset = (
-            KeyframeOffset(context, self.tracker, self.restricted)
+            KeyframeOffset(context, self.tracker, self.images_view, self.restricted)
             if settings.keyframe_offset
             else None
         )
@@ -238,6 +238,9 @@ class TrackingFrontEnd:
 
     def view(self, frame: Frame) -> View:
         """``frame``'s images on the device as a tracker sees them (no filter applied)."""
-        rgb, depth = upload_frame(frame.rgb, frame.depth, self.context.device)
+        return self.images_view(*upload_frame(frame.rgb, frame.depth, self.context.device))
+
+    def images_view(self, rgb: torch.Tensor, depth: torch.Tensor) -> View:
+        """Images already on the device as a tracker sees them (no filter applied)."""
         border = self.context.config.tracking.border
         return make_view(rgb, depth, self.context.directions, border)

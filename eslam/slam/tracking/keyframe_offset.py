@@ -35,7 +35,7 @@ from eslam.geometry.pose import invert, pose_distance
 from eslam.slam.context import RunContext
 from eslam.slam.state import SLAMState
 from eslam.slam.tracking.base import Tracker, judged
-from eslam.slam.views import View, make_view
+from eslam.slam.views import View
 
 COMPONENT = "keyframe_offset"
 """The key of this component's state in ``state.components``: ``keyframe`` (the frame
@@ -46,6 +46,9 @@ distances between the two camera centres, for metrics.json)."""
 MAPPED = "mapped"
 """The back end's entry (``components["back_end"]``) naming the newest keyframe whose
 mapping call completed (its frame index)."""
+
+ImagesView = Callable[[torch.Tensor, torch.Tensor], View]
+"""The front end's view of colour and depth images on the device (its border applied)."""
 
 Restrict = Callable[[View, torch.Tensor, SLAMState], View | None]
 """The front end's view filters: a view restricted as a frame tracked from a pose is
@@ -64,12 +67,16 @@ class KeyframeOffset:
     Args:
         context: the run.
         tracker: the front end's tracker.
+        images_view: the front end's view of a keyframe's images.
         restrict: the front end's view filters.
     """
 
-    def __init__(self, context: RunContext, tracker: Tracker, restrict: Restrict) -> None:
+    def __init__(
+        self, context: RunContext, tracker: Tracker, images_view: ImagesView, restrict: Restrict
+    ) -> None:
         self.context = context
         self.tracker = tracker
+        self.images_view = images_view
         self.restrict = restrict
         # D on the device, built once per measurement: no host-to-device copy per frame
         self._device_offset: tuple[tuple, torch.Tensor] | None = None
@@ -87,12 +94,7 @@ class KeyframeOffset:
         k = store.frame_indices.index(mapped)
         device = self.context.device
         pose = state.trajectory.poses[mapped].to(device)
-        whole = make_view(
-            store.rgb(k, device),
-            store.depth(k, device),
-            self.context.directions,
-            self.context.config.tracking.border,
-        )
+        whole = self.images_view(store.rgb(k, device), store.depth(k, device))
         view = self.restrict(whole, pose, state)
         if view is None:
             return
@@ -105,8 +107,9 @@ class KeyframeOffset:
                 mapped,
             )
             return
-        offset = keyframe_offset(pose.double(), tracked.double()).cpu()
-        translation, _ = pose_distance(pose, tracked)  # between the camera centres
+        mapped_pose, tracked = pose.double().cpu(), tracked.double().cpu()  # once a call
+        offset = keyframe_offset(mapped_pose, tracked)
+        translation, _ = pose_distance(mapped_pose, tracked)  # between the camera centres
         own["offset"] = offset.flatten().tolist()
         own["measured"] = own.get("measured", 0) + 1
         own["translation_mm"] = own.get("translation_mm", 0.0) + 1000.0 * float(translation)
