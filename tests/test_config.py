@@ -272,6 +272,7 @@ def test_counts_are_checked_at_load_naming_the_key(override: str, least: int) ->
         ("scene.max_extent=.nan", "nan"),
         ("render.surface_band=.nan", "nan"),
         ("tracking.sdf.degeneracy=.nan", "nan"),
+        ("mapping.loops.anchor_sigma=[0.01,-1]", "[0.01, -1.0]"),
     ],
 )
 def test_checks_name_one_key_and_its_value(override: str, got: str) -> None:

@@ -585,12 +585,12 @@ class LoopClosureConfig:
     """... and this share of those points showing the candidate's colour there (grey
     within 0.1 after removing the median difference: exposure): a box-shaped room fits
     itself turned round, its texture does not."""
-    min_correction: float = 0.02
+    min_correction: float = 0.01
     """A loop whose relative pose differs from the estimate's by less than this (metres)
     and ``min_correction_deg`` is kept in the graph but closes nothing (no solve, no
     refit): registration has errors of its own (on TUM fr1/xyz depth-only ICP differs
     from motion capture by about 1 degree), a correction below them is noise."""
-    min_correction_deg: float = 1.0
+    min_correction_deg: float = 0.3
     """See ``min_correction``, degrees."""
     min_keyframes_between: int = 10
     """Solve and refit at most once per this many keyframes; loops accepted in between
@@ -600,13 +600,26 @@ class LoopClosureConfig:
     translation (m) per component."""
     loop_sigma: tuple[float, float] = (0.002, 0.005)
     """The same for a loop edge."""
+    anchor_sigma: tuple[float, float] | None = (0.01, 0.02)
+    """A prior on every keyframe at its pose as tracked (rotation rad, translation m):
+    the tracker registers each frame to the global map, so its errors do not add up
+    along the chain, and the anchors keep a loop's correction near the loop instead of
+    spreading it back to keyframe 0; a loop that finds the estimate further off widens
+    them to twice its correction (docs/loops.md); null = no anchors."""
     robust_k: float = 5.0
     """Width of the loop edges' Cauchy kernel, in sigmas: a loop far outside it hardly
     moves the graph (one false loop cannot bend the trajectory)."""
     map: Literal["refit", "rebuild"] = "refit"
     """How the map follows a correction: refit = ``refit_passes`` over every keyframe
-    at its corrected pose from the current field; rebuild = a new field, fitted with the
-    first frame's schedule on the first window, then the refit passes."""
+    at its corrected pose from the current field; rebuild = a new field, its TSDF
+    regressed on every keyframe at its corrected pose (``rebuild_warm_start``), fitted
+    with the first frame's schedule on the first window, then the refit passes over every
+    keyframe."""
+    rebuild_warm_start: int = 20
+    """With ``map: rebuild``: TSDF warm-start steps per keyframe (the first frame's
+    ``first_warm_start_points`` each, the keyframes in turn) before the rendering steps;
+    0 = none (the first window's first-frame warm start, when ``first_warm_start`` is
+    tsdf)."""
     refit_passes: int = 1
     """Passes after a correction over the keyframes it moved (at least 5 mm or 0.25
     degrees), poses held: mapping calls of ``mapping.iterations`` steps on windows of
@@ -618,10 +631,13 @@ class LoopClosureConfig:
     def __post_init__(self) -> None:
         self.odometry_sigma = _pair(self.odometry_sigma, "odometry_sigma")
         self.loop_sigma = _pair(self.loop_sigma, "loop_sigma")
+        if self.anchor_sigma is not None:
+            self.anchor_sigma = _pair(self.anchor_sigma, "anchor_sigma")
         _at_least(self, "min_keyframes_back", 1)
         _at_least(self, "min_keyframes_between", 1)
         _at_least(self, "candidates", 0)
         _at_least(self, "refit_passes", 0)
+        _at_least(self, "rebuild_warm_start", 0)
         _at_least(self, "final_passes", 0)
         for name in ("min_travel", "max_residual", "robust_k"):
             if not getattr(self, name) > 0:

@@ -66,3 +66,17 @@ def test_the_return_is_closed_and_a_resumed_run_ends_the_same(
     resumed = run_slam(load_config(stopped / "config.yaml"), stopped, resume=True)
     np.testing.assert_allclose(resumed.poses, whole.poses, rtol=0, atol=1e-7)
     assert _record(stopped) == record
+
+
+@pytest.mark.slow
+def test_a_map_rebuilt_after_the_correction_tracks_the_return(
+    there_and_back: Path, tmp_path: Path
+) -> None:
+    """``mapping.loops.map: rebuild``: a new field, its TSDF regressed on every keyframe
+    at its corrected pose, then fitted; the frames after the closure track on it."""
+    config = demo_config(there_and_back, *LOOPS, "mapping.loops.map=rebuild")
+    run = run_slam(config, tmp_path / "rebuilt")
+    assert run.metrics["loops_closed"] >= 1
+    sequence = ReplicaSequence(there_and_back)
+    gt = np.stack([sequence[i].pose_gt for i in range(len(ORDER))])
+    assert run.metrics["ate_rmse_cm"] < min(1.0, 0.1 * static_ate_cm(gt))

@@ -44,6 +44,18 @@ def test_a_loop_spreads_the_disagreement_evenly() -> None:
     assert solution.error_after < solution.error_before
 
 
+def test_anchors_keep_the_correction_near_the_loop() -> None:
+    """The same graph with a prior on nodes 1 and 2 at their given poses (sigma as the
+    edges'): minimising the sum above plus (x1 - 1)^2 + (x2 - 2)^2 gives 3 x1 - x2 = 1
+    and 3 x2 - x1 = 5.3, so x1 = 1.0375, x2 = 2.1125: node 1, two edges from the loop's
+    far end, moves a third of node 2's shift instead of half."""
+    start = np.stack([_pose(0.0), _pose(1.0), _pose(2.0)])
+    edges = [_edge(0, 1, _pose(1.0)), _edge(1, 2, _pose(1.0)), _edge(0, 2, _pose(2.3))]
+    solution = solve_pose_graph(start, edges, anchor=(0.01, 0.01))
+    np.testing.assert_allclose(solution.poses[:, 0, 3], [0.0, 1.0375, 2.1125], atol=1e-6)
+    np.testing.assert_allclose(solution.poses[:, :3, :3], np.tile(np.eye(3), (3, 1, 1)), atol=1e-9)
+
+
 def test_a_square_with_yaw_drift_closes() -> None:
     """Four 1 m sides with 90 degree turns; odometry measures 91 degrees per turn, so the
     chain ends 4 degrees and some centimetres off; the loop edge (the true 4->0 side)

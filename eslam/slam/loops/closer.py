@@ -216,7 +216,11 @@ class LoopCloser:
             return
         own["last_closed"] = current
         started = time.perf_counter()
-        solution = solve_pose_graph(poses, self._edges(poses, frames, own["edges"]))
+        solution = solve_pose_graph(
+            poses,
+            self._edges(poses, frames, own["edges"]),
+            anchor=anchor_sigmas(self.config.anchor_sigma, metres, degrees),
+        )
         trajectory = state.trajectory
         count = state.next_frame
         before = trajectory.poses[:count].detach().cpu().double().numpy()
@@ -272,6 +276,21 @@ class LoopCloser:
                     )
                 )
         return edges
+
+
+def anchor_sigmas(
+    anchor: tuple[float, float] | None, metres: float, degrees: float
+) -> tuple[float, float] | None:
+    """The anchors' sigmas (rad, m) for a loop that finds the estimate ``metres`` and
+    ``degrees`` off: ``anchor`` (``mapping.loops.anchor_sigma``), widened to twice the
+    correction. A keyframe's tracked pose is trusted to within twice what the loop shows
+    the tracker can be off: a correction within the anchors stays near the loop (the
+    tracker's error did not add up along the chain), a larger one (drift that did add
+    up) bends the chain nearly as a graph without anchors would, instead of being
+    outvoted by every anchor and refused by the loop edge's robust kernel."""
+    if anchor is None:
+        return None
+    return max(anchor[0], 2 * math.radians(degrees)), max(anchor[1], 2 * metres)
 
 
 def anchors(keyframe_frames: tuple[int, ...], count: int) -> np.ndarray:

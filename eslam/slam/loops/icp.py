@@ -35,7 +35,11 @@ class IcpSettings:
     """Projective ICP's settings (metres; module doc).
 
     Attributes:
-        stride: take every stride-th source pixel in each direction.
+        stride: take every stride-th source pixel in each direction; None = one per
+            160 pixels of image width (4 at 640x480, 1 at 160x120: about 19,000 source
+            points whatever the image size; a small noisy image's every 4th pixel
+            leaves too few points for a loop's relative pose, docs/results.md "Loop
+            closure").
         normal_step: normals from differences this many pixels either side; None =
             one per 128 pixels of image width (a sensor's noise is per pixel, so a
             larger image needs a longer baseline: 5 at 640x480, 1 at 160x120).
@@ -48,7 +52,7 @@ class IcpSettings:
             than this (grey in [0, 1]).
     """
 
-    stride: int = 4
+    stride: int | None = None
     normal_step: int | None = None
     gates: tuple[float, ...] = (0.2, 0.2, 0.1, 0.1, 0.05, 0.05, 0.03, 0.03, 0.02, 0.02)
     inlier_distance: float = 0.02
@@ -208,7 +212,8 @@ def register(
     (source camera to target camera); module doc. ``greys``: the (H, W) grey images in
     [0, 1] of source and target, for the colour agreement of the result."""
     step = settings.normal_step or max(1, round(intrinsics.width / 128))
-    images = _Images(source_depth, target_depth, intrinsics, settings.stride, step)
+    stride = settings.stride or max(1, round(intrinsics.width / 160))
+    images = _Images(source_depth, target_depth, intrinsics, stride, step)
     pose = np.asarray(initial, dtype=np.float64).copy()
     information = np.zeros((6, 6))
     for gate in settings.gates:

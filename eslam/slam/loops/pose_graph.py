@@ -91,9 +91,22 @@ def _noise(gtsam, edge: Edge):
 
 
 def solve_pose_graph(
-    poses: np.ndarray, edges: Sequence[Edge], fixed: int = 0, max_iterations: int = 100
+    poses: np.ndarray,
+    edges: Sequence[Edge],
+    fixed: int = 0,
+    max_iterations: int = 100,
+    anchor: tuple[float, float] | None = None,
 ) -> GraphSolution:
     """Optimise the node poses ``poses`` (N, 4, 4) under ``edges``, node ``fixed`` held.
+
+    ``anchor`` (rotation rad, translation m): every other node also has a prior at its
+    pose as given, with these sigmas. A tracker that registers each frame to a global
+    map measures each keyframe's pose against that map, not only against the keyframe
+    before it: its error does not add up along the chain, and a loop's correction
+    should stay near the loop instead of spreading along every odometry edge back to
+    the fixed node. With priors of sigma s_a and odometry edges of sigma s_o a
+    correction fades along the chain over about s_a / s_o nodes (a chain of springs
+    tied to the ground); None = no priors (the correction spreads over the whole chain).
 
     Raises:
         ValueError: an edge names a node outside [0, N) or joins a node to itself.
@@ -111,6 +124,12 @@ def solve_pose_graph(
             fixed, gtsam.Pose3(poses[fixed]), gtsam.noiseModel.Isotropic.Sigma(6, FIXED_SIGMA)
         )
     )
+    if anchor is not None:
+        sigmas = np.array([anchor[0]] * 3 + [anchor[1]] * 3, dtype=float)
+        prior = gtsam.noiseModel.Diagonal.Sigmas(sigmas)
+        for index in range(count):
+            if index != fixed:
+                graph.add(gtsam.PriorFactorPose3(index, gtsam.Pose3(poses[index]), prior))
     for edge in edges:
         measured = gtsam.Pose3(np.asarray(edge.relative, dtype=np.float64))
         graph.add(gtsam.BetweenFactorPose3(edge.a, edge.b, measured, _noise(gtsam, edge)))

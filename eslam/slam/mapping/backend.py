@@ -33,8 +33,7 @@ from eslam.field.scene_field import SceneField
 from eslam.registry import Registry
 from eslam.slam.context import RunContext
 from eslam.slam.cuda_graphs import WindowMapper
-from eslam.slam.loops.closer import LoopCloser, anchors
-from eslam.slam.loops.pose_graph import carry_poses
+from eslam.slam.loops.closer import LoopCloser
 from eslam.slam.mapping.bounds_policy import (
     bound_from_frame,
     check_depth_found,
@@ -51,6 +50,7 @@ from eslam.slam.mapping.mapper import (
     MappingSettings,
     mapping_schedule,
 )
+from eslam.slam.mapping.passes import KeyframePasses
 from eslam.slam.run.observers import MappingDone, MappingStep
 from eslam.slam.state import FrameMark, SLAMState, new_field
 from eslam.slam.tracking.frontend import TrackedFrame
@@ -138,8 +138,11 @@ class KeyframeBackEnd:
             config.data.depth_scale, bound=None, enabled=config.data.depth_check
         )
         self._before: tuple[dict[str, torch.Tensor], torch.Tensor] | None = None
+        self.passes = KeyframePasses(context, self.mapper, self._views)
         self.loops = (
-            LoopCloser(context, self.follow_correction) if config.mapping.loops.enabled else None
+            LoopCloser(context, self.passes.follow_correction)
+            if config.mapping.loops.enabled
+            else None
         )
 
     def begin_frame(self) -> None:
@@ -182,7 +185,7 @@ class KeyframeBackEnd:
         self._map_last(state, last)
         passes = self.context.config.mapping.loops.final_passes
         if self.loops is not None and passes > 0 and not state.component("loops").get("final"):
-            self.passes(state, passes, optimise_poses=True)
+            self.passes.run(state, passes, optimise_poses=True)
             state.component("loops")["final"] = True
 
     def _map_last(self, state: SLAMState, last: Frame | None) -> None:
@@ -318,68 +321,6 @@ class KeyframeBackEnd:
         )
         if carried:
             trajectory.set_poses(carried, poses)
-
-    def follow_correction(self, state: SLAMState, moved: list[int]) -> None:
-        """The map follows a loop correction (``mapping.loops.map``) that moved the
-        keyframes ``moved`` (ids): refit = ``refit_passes`` over those keyframes, poses
-        held; rebuild = a new field, fitted from every keyframe."""
-        loops = self.context.config.mapping.loops
-        if loops.map == "rebuild":
-            field = state.field
-            if field is None:
-                raise RuntimeError("a loop correction before the field exists")
-            state.field = new_field(self.context.config, field.bound, self.context.device)
-            self.passes(state, 1, optimise_poses=False, first=True)
-            moved = list(range(len(state.keyframes)))
-        self.passes(state, loops.refit_passes, optimise_poses=False, among=moved)
-
-    def passes(
-        self,
-        state: SLAMState,
-        passes: int,
-        optimise_poses: bool,
-        first: bool = False,
-        among: list[int] | None = None,
-    ) -> None:
-        """``passes`` over every keyframe (or the ids ``among``): mapping calls of
-        ``mapping.iterations`` steps on windows of ``mapping.window`` keyframes holding
-        each once per pass, in an order drawn from the run's generator; keyframe 0's
-        pose held, the others' refined with ``optimise_poses``. ``first``: one call with
-        the first frame's schedule (the map is new) on the first window instead."""
-        field, store = state.field, state.keyframes
-        if field is None:
-            raise RuntimeError("mapping passes before the field exists")
-        config = self.context.config.mapping
-        frame_of = store.frame_indices
-        generator = state.generator
-        count = state.next_frame
-        before = state.trajectory.poses[:count].detach().cpu().double().numpy()
-        keyframes_before = before[list(frame_of)]
-        chosen = list(range(len(store))) if among is None else among
-        if not chosen:  # a correction that moved no keyframe far enough to refit
-            return
-        for _ in range(passes):
-            order = torch.randperm(len(chosen), generator=generator, device=generator.device)
-            windows = torch.split(torch.tensor(chosen)[order.cpu()], config.window)
-            for window in windows[:1] if first else windows:
-                keyframes = sorted(window.tolist())
-                optimise = [optimise_poses and k != 0 for k in keyframes]
-                result = self.mapper.map(
-                    field,
-                    self._views(state).views(keyframes),
-                    store.poses[keyframes].to(self.context.device),
-                    optimise,
-                    mapping_schedule(config, first=first),
-                    generator=state.generator,
-                )
-                moved = [i for i, flag in enumerate(optimise) if flag]
-                if moved:
-                    frames = [frame_of[keyframes[i]] for i in moved]
-                    state.trajectory.set_poses(frames, result.poses[moved])
-        if optimise_poses:  # every frame moves with the latest keyframe at or before it
-            after = state.trajectory.poses[list(frame_of)].detach().cpu().double().numpy()
-            moved = carry_poses(before, anchors(frame_of, count), keyframes_before, after)
-            state.trajectory.set_poses(list(range(count)), torch.from_numpy(moved))
 
 
 BACK_ENDS: Registry[BackEnd] = Registry("mapping back end", "mapping.back_end")

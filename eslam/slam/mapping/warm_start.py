@@ -12,6 +12,7 @@ without the warm start) fit colour and make the rendered depth consistent.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import torch
@@ -113,22 +114,47 @@ def tsdf_warm_start(
     lr_decoder: float,
     generator: torch.Generator,
 ) -> torch.Tensor:
-    """Fit ``field``'s TSDF (in place) to the projective TSDF of ``view`` at pose ``c2w``.
+    """Fit ``field``'s TSDF (in place) to the projective TSDF of ``view`` at pose ``c2w``:
+    :func:`tsdf_warm_start_views` with the one view."""
+    return tsdf_warm_start_views(
+        field, [view], c2w.unsqueeze(0), plan, lr_planes, lr_decoder, generator
+    )
 
-    Each step minimises mean_i (s(p_i) - s*_i)^2 over ``plan.points`` fresh points
-    (:func:`warm_start_points`) with Adam at ``plan.lr_factor`` times ``lr_planes`` and
-    ``lr_decoder``. With shared planes (ablation a) the colour branch reads the planes
-    fitted here. No host synchronisation.
+
+def tsdf_warm_start_views(
+    field: SceneField,
+    views: Sequence[View],
+    c2ws: torch.Tensor,
+    plan: WarmStart,
+    lr_planes: float,
+    lr_decoder: float,
+    generator: torch.Generator,
+) -> torch.Tensor:
+    """Fit ``field``'s TSDF (in place) to the projective TSDF of ``views`` at ``c2ws``.
+
+    Step i minimises mean_j (s(p_j) - s*_j)^2 over ``plan.points`` fresh points of view
+    i mod N (:func:`warm_start_points`; the views in turn, so one view gives the first
+    frame's warm start and many a map rebuilt from every keyframe after a loop
+    correction, ``mapping.loops.map: rebuild``) with Adam at ``plan.lr_factor`` times
+    ``lr_planes`` and ``lr_decoder``. With shared planes (ablation a) the colour branch
+    reads the planes fitted here. No host synchronisation.
+
+    Args:
+        views: N views.
+        c2ws: (N, 4, 4) their camera-to-world poses.
 
     Returns:
         0-d tensor, the loss of the last step (nan when ``plan.steps`` is 0).
     """
+    if len(views) != len(c2ws) or not views:
+        raise ValueError(f"{len(views)} views with {len(c2ws)} poses")
     optimiser = warm_start_optimiser(field, lr_planes * plan.lr_factor, lr_decoder * plan.lr_factor)
-    loss = torch.full((), float("nan"), device=c2w.device)
-    c2w = c2w.detach()
-    for _ in range(plan.steps):
+    loss = torch.full((), float("nan"), device=c2ws.device)
+    c2ws = c2ws.detach()
+    for step in range(plan.steps):
+        k = step % len(views)
         points, target = warm_start_points(
-            view, c2w, plan.points, field.truncation, plan.band_fraction, generator
+            views[k], c2ws[k], plan.points, field.truncation, plan.band_fraction, generator
         )
         loss = (field.query(points, with_rgb=False).sdf - target).square().mean()
         optimiser.zero_grad(set_to_none=True)
