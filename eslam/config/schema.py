@@ -700,6 +700,12 @@ class MappingConfig:
     time: beside the tracker, frames are tracked on the warm-started map while these
     run, and the map they make replaces it under the track (docs/live.md). null =
     ``first_iterations``; recorded data always takes ``first_iterations``."""
+    realtime_warm_start: int = 0
+    """While frames arrive in real time: TSDF regression steps (``first_warm_start_points``
+    points each, the window's keyframes in turn, at their poses) at the start of every
+    mapping call after the first; beside the tracker the tracker gets the map they leave
+    before the call's rendering steps run (a new keyframe's geometry within a fraction of
+    a call). 0 = none; recorded data never takes them."""
     first_iterations: int = 1000
     """Steps on the first frame (release: 1000)."""
     first_lr_factor: float = 5.0
@@ -765,6 +771,7 @@ class MappingConfig:
         for name in ("realtime_iterations", "realtime_first_iterations"):
             if getattr(self, name) is not None:
                 _at_least(self, name, 0)
+        _at_least(self, "realtime_warm_start", 0)
         _at_least(self, "first_iterations", 0)
         _at_least(self, "first_warm_start_steps", 0)
         _at_least(self, "first_warm_start_points", 1)

@@ -24,7 +24,12 @@ from eslam.slam.mapping.concurrent_mapping import (
     same_layout,
     split_warm_start,
 )
-from eslam.slam.mapping.mapper import MappingResult, MappingSchedule, mapping_schedule
+from eslam.slam.mapping.mapper import (
+    LATER_WARM_START_LR,
+    MappingResult,
+    MappingSchedule,
+    mapping_schedule,
+)
 from eslam.slam.mapping.warm_start import WarmStart
 from eslam.slam.mapping.workers import ProcessWorker
 from eslam.slam.run.observers import FrameDone, RunObserverBase
@@ -253,10 +258,12 @@ class RecordingMapper:
     def __init__(self, mapper) -> None:
         self.mapper = mapper
         self.calls: list[tuple[int, int]] = []
+        self.windows: list[int] = []  # each call's keyframes
 
     def map(self, field, views, poses, optimise, schedule, generator, on_step=None):
         warm = 0 if schedule.warm_start is None else schedule.warm_start.steps
         self.calls.append((warm, schedule.iterations))
+        self.windows.append(len(views))
         return self.mapper.map(field, views, poses, optimise, schedule, generator)
 
 
@@ -317,6 +324,7 @@ def test_a_real_time_run_maps_with_its_own_step_count(tiny_sequence: Path, tmp_p
         "mapping.concurrent_worker=thread",  # the recording mapper runs in this process
         "mapping.realtime_iterations=1",
         "mapping.realtime_first_iterations=2",  # QUICK's first_iterations: 5
+        "mapping.realtime_warm_start=0",  # the CPU preset's 60: the test below
         "output.mesh=false",
     )
     result = run_slam(config, tmp_path / "rt", components=Components(back_end=recording))
@@ -324,6 +332,43 @@ def test_a_real_time_run_maps_with_its_own_step_count(tiny_sequence: Path, tmp_p
     assert calls[0] == (0, 2), calls
     assert len(calls) >= 2 and all(call == (0, 1) for call in calls[1:]), calls
     assert result.metrics["mapping_calls"] == len(calls)
+
+
+@pytest.mark.slow
+def test_a_real_time_call_s_warm_start_reaches_the_tracker_before_its_rendering_steps(
+    tiny_sequence: Path, tmp_path: Path
+) -> None:
+    recording = RecordingBackEnd()
+    published: list[int] = []
+    config = tiny_config(
+        tiny_sequence,
+        *QUICK,
+        "data.realtime=true",
+        "data.replay_fps=200",
+        "mapping.concurrent_worker=thread",  # the recording mapper runs in this process
+        "mapping.realtime_iterations=1",
+        "mapping.realtime_first_iterations=2",
+        "mapping.realtime_warm_start=4",
+        "mapping.first_warm_start_points=200",
+        "output.mesh=false",
+    )
+
+    def build(context) -> ConcurrentBackEnd:
+        back_end = recording(context)
+        publish = back_end._publish
+        back_end._publish = lambda state: (published.append(1), publish(state))[1]
+        return back_end
+
+    result = run_slam(config, tmp_path / "rt", components=Components(back_end=build))
+    calls, windows = recording.calls(), recording.built.mapper.windows
+    # the first call as before; every later one in two parts: its 4 TSDF steps over the
+    # window, published to the tracker, then its rendering step
+    assert calls[0] == (0, 2) and len(calls) >= 3 and len(calls) % 2 == 1, calls
+    assert calls[1::2] == [(4, 0)] * (len(calls) // 2), calls
+    assert calls[2::2] == [(0, 1)] * (len(calls) // 2), calls
+    assert windows[1] == windows[2] >= 2 and windows[1::2] == windows[2::2], windows
+    assert len(published) == len(calls)  # each part reached the tracker's map
+    assert result.metrics["mapping_calls"] == 1 + len(calls) // 2
 
 
 def test_the_real_time_step_counts_are_taken_in_real_time_only() -> None:
@@ -342,9 +387,24 @@ def test_the_real_time_step_counts_are_taken_in_real_time_only() -> None:
     ).mapping
     assert mapping_schedule(unset, first=False, real_time=True).iterations == 15
     assert mapping_schedule(unset, first=True, real_time=True).iterations == 30
-    for name in ("realtime_iterations", "realtime_first_iterations"):
+    for name in ("realtime_iterations", "realtime_first_iterations", "realtime_warm_start"):
         with pytest.raises(ConfigError, match=name):
             load_config(DEMO_CONFIG, [f"mapping.{name}=-1"])
+
+
+def test_a_real_time_warm_start_begins_later_calls_in_real_time_only() -> None:
+    config = load_config(
+        DEMO_CONFIG,
+        ["mapping.realtime_warm_start=30", "mapping.first_warm_start_points=2000"],
+    ).mapping
+    later = mapping_schedule(config, first=False, real_time=True)
+    assert later.warm_start == WarmStart(30, 2000, lr_factor=LATER_WARM_START_LR)
+    assert later.iterations == config.realtime_iterations
+    assert mapping_schedule(config, first=False, real_time=False).warm_start is None
+    first = mapping_schedule(config, first=True, real_time=True)  # the first: its own
+    assert first.warm_start == WarmStart(config.first_warm_start_steps, 2000)
+    none = load_config(DEMO_CONFIG, ["mapping.realtime_warm_start=0"]).mapping
+    assert mapping_schedule(none, first=False, real_time=True).warm_start is None
 
 
 def test_a_warm_start_lead_splits_the_steps_between_the_first_pose_and_the_worker() -> None:

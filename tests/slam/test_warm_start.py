@@ -1,4 +1,4 @@
-"""The TSDF warm start of the first frame (eslam/slam/mapping/warm_start.py)."""
+"""The TSDF warm start (eslam/slam/mapping/warm_start.py): the first frame's, a window's."""
 
 from __future__ import annotations
 
@@ -11,7 +11,13 @@ from eslam.config import ESLAMConfig, LossConfig
 from eslam.field.scene_field import SceneField
 from eslam.losses import sdf_loss_terms
 from eslam.render.rays import camera_directions
-from eslam.slam.mapping.mapper import MappingSettings, map_window, mapping_schedule
+from eslam.slam.mapping.mapper import (
+    MappingSchedule,
+    MappingSettings,
+    map_window,
+    mapping_schedule,
+    warm_start_window,
+)
 from eslam.slam.mapping.warm_start import (
     WarmStart,
     projective_tsdf,
@@ -162,6 +168,14 @@ def test_the_warm_start_on_several_views_fits_each_of_them() -> None:
     both, first_only = errors(field), errors(alone)
     assert both[0] < 0.3 * before[0] and both[1] < 0.3 * before[1]
     assert first_only[1] > 0.5 * before[1]
+    # a mapping call's warm start (a later call's in real time: mapping.realtime_warm_start)
+    # takes its whole window the same way
+    config, window, _ = _setup()
+    settings = MappingSettings(config.mapping, config.render, config.loss)
+    schedule = MappingSchedule(0, 1.0, 10, warm_start=plan)
+    warm_start_window(window, [view, view], poses, settings, schedule, draws)
+    called = errors(window)
+    assert called[0] < 0.3 * before[0] and called[1] < 0.3 * before[1]
 
 
 def test_the_warm_start_needs_a_pose_per_view() -> None:

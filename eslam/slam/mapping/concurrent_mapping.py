@@ -28,6 +28,9 @@ is set: the worker runs the others, and the tracker gets the map they leave befo
 rendering steps start) and the warm-started map goes to the tracker at once, so
 tracking starts while the first call's rendering steps go on; without a warm
 start the tracker waits for the first call (there is no map to track on before it).
+In real time a later call may begin with TSDF steps over its window
+(``mapping.realtime_warm_start``): the worker runs them as a part of their own, whose
+map goes to the tracker before the call's rendering steps run (one call counted).
 
 A call is never cut half way: at the end of the stream, when the run stops
 (:meth:`ConcurrentBackEnd.settle`) and when a frame fails (:meth:`~ConcurrentBackEnd.
@@ -79,8 +82,8 @@ class Flight:
         handed_at: the frame being processed when it was handed over.
         started: when (seconds, ``time.perf_counter``).
         then: the rest of the call, handed over once this part is done and in the
-            tracker's map (the first keyframe's rendering steps, after the warm-start
-            steps the worker runs), or None.
+            tracker's map (the rendering steps, after the warm-start steps the worker
+            runs: the first keyframe's, a later call's in real time), or None.
     """
 
     job: MappingJob
@@ -211,7 +214,12 @@ class ConcurrentBackEnd(KeyframeBackEnd):
         job = self.prepare(frame, index, state, working)
         warmed = job.schedule.warm_start is not None
         then = None
-        if warmed:  # the map's first keyframe: the tracker has the warm-started map at once
+        if warmed and not job.first:  # in real time: the warm start reaches the tracker
+            then = dataclasses.replace(job.schedule, warm_start=None)  # before the rendering
+            job = dataclasses.replace(  # steps run
+                job, schedule=dataclasses.replace(job.schedule, iterations=0)
+            )
+        elif warmed:  # the map's first keyframe: the tracker has the warm-started map at once
             lead, rest = split_warm_start(job.schedule, self.mapping.mapping.first_warm_start_lead)
             warm_start_window(working, job.views, job.poses, self.mapping, lead, self.generator)
             self._publish(state)

@@ -26,7 +26,7 @@ from eslam.config import LossConfig, MappingConfig, RenderConfig
 from eslam.field.scene_field import SceneField
 from eslam.geometry.pose import pose_from_quaternion_translation, quaternion_translation_from_pose
 from eslam.losses import compute_losses, depth_noise_weights
-from eslam.slam.mapping.warm_start import WarmStart, tsdf_warm_start
+from eslam.slam.mapping.warm_start import WarmStart, tsdf_warm_start_views
 from eslam.slam.views import (
     RayDraws,
     View,
@@ -70,8 +70,9 @@ class MappingSchedule:
         lr_factor: multiplier of the map learning rates at the first step.
         rays: rays per step over the whole window.
         lr_decay: the map learning rates end at this fraction of their start (cosine).
-        warm_start: a TSDF regression on the window's first view before the rendering
-            steps (:mod:`eslam.slam.mapping.warm_start`), or None.
+        warm_start: a TSDF regression on the window's views before the rendering steps
+            (:mod:`eslam.slam.mapping.warm_start`; the first call's on its one view, a
+            later call's in real time with ``realtime_warm_start``), or None.
     """
 
     iterations: int
@@ -89,6 +90,13 @@ class MappingSchedule:
         return self.lr_decay + (1.0 - self.lr_decay) * 0.5 * (1.0 + math.cos(math.pi * t))
 
 
+LATER_WARM_START_LR = 5.0
+"""The learning-rate factor of a later call's warm start (``realtime_warm_start``): the
+first frame's 20x (:class:`~eslam.slam.mapping.warm_start.WarmStart`) fits a blank map;
+on a map already fitted, 5x kept TUM fr1/xyz live replays as accurate or more
+(docs/results.md, "Live")."""
+
+
 def mapping_schedule(
     config: MappingConfig, first: bool, real_time: bool = False
 ) -> MappingSchedule:
@@ -99,7 +107,8 @@ def mapping_schedule(
     and the rates decaying to ``first_lr_decay`` of their start, after the TSDF warm start
     when ``first_warm_start`` is tsdf; later calls run ``iterations`` at 1x with ``rays``.
     While frames arrive in ``real_time``, ``realtime_first_iterations`` and
-    ``realtime_iterations`` replace the two step counts when set.
+    ``realtime_iterations`` replace the two step counts when set, and later calls begin
+    with ``realtime_warm_start`` TSDF steps over their window when that is above 0.
     """
     if first:
         warm = (
@@ -120,7 +129,11 @@ def mapping_schedule(
     iterations = config.iterations
     if real_time and config.realtime_iterations is not None:
         iterations = config.realtime_iterations
-    return MappingSchedule(iterations=iterations, lr_factor=1.0, rays=config.rays)
+    warm = None
+    if real_time and config.realtime_warm_start > 0:
+        steps, points = config.realtime_warm_start, config.first_warm_start_points
+        warm = WarmStart(steps, points, lr_factor=LATER_WARM_START_LR)
+    return MappingSchedule(iterations=iterations, lr_factor=1.0, rays=config.rays, warm_start=warm)
 
 
 @dataclass(frozen=True, eq=False)
@@ -276,13 +289,14 @@ def warm_start_window(
     schedule: MappingSchedule,
     generator: torch.Generator,
 ) -> None:
-    """The TSDF warm start of ``schedule`` (if it has one) on ``views[0]`` at ``poses[0]``:
-    what a mapping call runs before its rendering steps (:mod:`eslam.slam.mapping.warm_start`)."""
+    """The TSDF warm start of ``schedule`` (if it has one) on the window's ``views`` at
+    ``poses``, in turn (the first call: its one view): what a mapping call runs before its
+    rendering steps (:mod:`eslam.slam.mapping.warm_start`)."""
     if schedule.warm_start is not None:
-        tsdf_warm_start(
+        tsdf_warm_start_views(
             field,
-            views[0],
-            poses[0],
+            views,
+            poses,
             schedule.warm_start,
             settings.mapping.lr_planes,
             settings.mapping.lr_decoders,
