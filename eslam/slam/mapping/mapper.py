@@ -93,8 +93,7 @@ class MappingSchedule:
 LATER_WARM_START_LR = 5.0
 """The learning-rate factor of a later call's warm start (``realtime_warm_start``): the
 first frame's 20x (:class:`~eslam.slam.mapping.warm_start.WarmStart`) fits a blank map;
-on a map already fitted, 5x kept TUM fr1/xyz live replays as accurate or more
-(docs/results.md, "Live")."""
+a map already fitted takes a gentler rate (docs/results.md, "What we tried")."""
 
 
 def mapping_schedule(
