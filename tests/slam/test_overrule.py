@@ -238,3 +238,46 @@ def test_keyframes_that_look_alike_start_a_frame_the_latest_one_cannot(alike: in
     assert found is not None
     assert (found.reference, found.inliers, found.source) == (0, 80, "alike_keyframe")
     assert torch.equal(found.pose, torch.from_numpy(np.eye(4)))
+
+
+SHIFT = 0.06
+"""How far the shifted tracker's frame lies from the mapper's, metres: more than the
+rule's 5 cm."""
+
+
+class Shifted:
+    """The SDF tracker with every answer moved :data:`SHIFT` along x: a tracker whose
+    optimum lies that far from the mapper's (``tracking.keyframe_offset`` takes its poses
+    back into the mapper's frame)."""
+
+    def __init__(self, config) -> None:
+        self.real = TRACKERS.make("sdf", config)
+
+    def track(self, field, view, initial_pose, generator):
+        result = self.real.track(field, view, initial_pose, generator)
+        pose = result.pose.clone()
+        pose[0, 3] += SHIFT
+        return TrackingResult(pose, result.loss, result.quality)
+
+
+@pytest.mark.slow
+def test_the_shift_is_measured_in_the_mappers_frame(room: Path, tmp_path: Path, register) -> None:
+    """With the keyframe offset a frame's start of features is chained from poses in the
+    mapper's frame, so the tracker's answer is compared with it after the offset: taken
+    before, a tracker 6 cm from the mapper would be overruled on every frame it may be."""
+    register(TRACKERS, "shifted", Shifted)
+    config = demo_config(
+        room,
+        "tracking.start=features",
+        "tracking.start_overrule_matches=20",
+        "tracking.keyframe_offset=true",
+    )
+    config = dataclasses.replace(
+        config, tracking=dataclasses.replace(config.tracking, method="shifted")
+    )
+    result = run_slam(config, tmp_path / "run")
+    assert result.metrics["tracking_keyframe_offsets"] >= 1
+    assert result.metrics["tracking_overruled"] == 0
+    assert errors(tmp_path / "run").max() < 0.01  # the offset took the shift back
+    shifts = json.loads((tmp_path / "run" / "timings.json").read_text())["tracking_start_shift_m"]
+    assert max(shifts[1:]) < 0.02

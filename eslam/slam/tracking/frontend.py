@@ -17,7 +17,9 @@ features keeps that pose and, in real time, skips the recovery
 (``tracking.recovery.carried``). With ``tracking.keyframe_offset`` the tracker's pose
 of a frame it passed is moved into the mapper's frame
 (:mod:`eslam.slam.tracking.keyframe_offset`: the offset is measured by tracking the
-newest mapped keyframe again after each mapping call). The run loop appends the
+newest mapped keyframe again after each mapping call), and the overrule rule measures
+the tracker's shift from its start of features there too (the start is chained from
+poses in that frame). The run loop appends the
 answer, a :class:`TrackedFrame`, to the trajectory; observers report it.
 
 The front end keeps no state of its own between frames outside the run's state:
@@ -176,7 +178,8 @@ class TrackingFrontEnd:
         result = self.tracker.track(state.field, view, guess, state.generator)
         pose, quality = judged(result, guess)
         if self.feature_start is not None and started is not None and quality is not None:
-            shift = None if quality.failed else start_shift(started, pose)
+            # the start is chained from poses in the mapper's frame: compare it there
+            shift = None if quality.failed else start_shift(started, self.in_map(pose, state))
             quality = replace(quality, start_matches=started.inliers, start_shift_m=shift)
             if self.feature_start.overrules(started, quality, state):
                 pose, quality = guess, replace(quality, failed=True, overruled=True)
@@ -190,14 +193,19 @@ class TrackingFrontEnd:
                 found = recovery.recover(frame, whole, guess, state, query)
                 if found is not None:
                     pose, quality = found.pose, found.quality
-        if self.offset is not None and not (quality is not None and quality.failed):
-            pose = self.offset.apply(pose, state)  # the tracker's pose in the mapper's frame
+        if not (quality is not None and quality.failed):
+            pose = self.in_map(pose, state)
         if self.feature_start is not None and query is not None:
             # a failed frame keeps its features' pose: the next frame starts from it
             # (visual odometry while the map cannot confirm), not from an older keyframe
             if quality is None or not quality.failed or started is not None:
                 self.feature_start.remember(query, state)
         return TrackedFrame(pose, has_depth, True, quality, kept=kept)
+
+    def in_map(self, pose: torch.Tensor, state: SLAMState) -> torch.Tensor:
+        """The tracker's ``pose`` in the mapper's frame (the keyframe offset applied, when
+        it is on; else ``pose``)."""
+        return pose if self.offset is None else self.offset.apply(pose, state)
 
     def filtered(
         self,
