@@ -313,20 +313,27 @@ def test_a_warm_start_lead_gives_the_tracker_the_worker_s_steps_before_rendering
     )
 
 
+def real_time_config(sequence: Path, *extra: str):
+    """The tiny run replayed in real time, its calls in a thread (a recording mapper runs
+    in this process), 2 rendering steps for the first call and 1 for each later one."""
+    return tiny_config(
+        sequence,
+        *QUICK,  # mapping.first_iterations=5, mapping.iterations=3
+        "data.realtime=true",
+        "data.replay_fps=200",
+        "mapping.concurrent_worker=thread",
+        "mapping.realtime_iterations=1",
+        "mapping.realtime_first_iterations=2",
+        "output.mesh=false",
+        *extra,
+    )
+
+
 @pytest.mark.slow
 def test_a_real_time_run_maps_with_its_own_step_count(tiny_sequence: Path, tmp_path: Path) -> None:
     recording = RecordingBackEnd()
-    config = tiny_config(
-        tiny_sequence,
-        *QUICK,  # mapping.iterations=3
-        "data.realtime=true",
-        "data.replay_fps=200",
-        "mapping.concurrent_worker=thread",  # the recording mapper runs in this process
-        "mapping.realtime_iterations=1",
-        "mapping.realtime_first_iterations=2",  # QUICK's first_iterations: 5
-        "mapping.realtime_warm_start=0",  # the CPU preset's 60: the test below
-        "output.mesh=false",
-    )
+    # the CPU preset's 60 TSDF steps a later call: the test below
+    config = real_time_config(tiny_sequence, "mapping.realtime_warm_start=0")
     result = run_slam(config, tmp_path / "rt", components=Components(back_end=recording))
     calls = recording.calls()
     assert calls[0] == (0, 2), calls
@@ -340,17 +347,8 @@ def test_a_real_time_call_s_warm_start_reaches_the_tracker_before_its_rendering_
 ) -> None:
     recording = RecordingBackEnd()
     published: list[int] = []
-    config = tiny_config(
-        tiny_sequence,
-        *QUICK,
-        "data.realtime=true",
-        "data.replay_fps=200",
-        "mapping.concurrent_worker=thread",  # the recording mapper runs in this process
-        "mapping.realtime_iterations=1",
-        "mapping.realtime_first_iterations=2",
-        "mapping.realtime_warm_start=4",
-        "mapping.first_warm_start_points=200",
-        "output.mesh=false",
+    config = real_time_config(
+        tiny_sequence, "mapping.realtime_warm_start=4", "mapping.first_warm_start_points=200"
     )
 
     def build(context) -> ConcurrentBackEnd:
