@@ -214,15 +214,15 @@ class ConcurrentBackEnd(KeyframeBackEnd):
         job = self.prepare(frame, index, state, working)
         warmed = job.schedule.warm_start is not None
         then = None
-        if warmed and not job.first:  # in real time: the warm start reaches the tracker
-            then = dataclasses.replace(job.schedule, warm_start=None)  # before the rendering
-            job = dataclasses.replace(  # steps run
-                job, schedule=dataclasses.replace(job.schedule, iterations=0)
-            )
-        elif warmed:  # the map's first keyframe: the tracker has the warm-started map at once
-            lead, rest = split_warm_start(job.schedule, self.mapping.mapping.first_warm_start_lead)
-            warm_start_window(working, job.views, job.poses, self.mapping, lead, self.generator)
-            self._publish(state)
+        if warmed:
+            # the first keyframe's lead steps run here (the tracker has that map at once);
+            # a later call's (in real time) all run in the worker
+            lead = self.mapping.mapping.first_warm_start_lead if job.first else 0
+            before, rest = split_warm_start(job.schedule, lead)
+            if job.first:
+                views, poses = job.views, job.poses
+                warm_start_window(working, views, poses, self.mapping, before, self.generator)
+                self._publish(state)
             if rest.warm_start is not None:  # the worker's warm-start steps reach the
                 then = dataclasses.replace(rest, warm_start=None)  # tracker before the
                 rest = dataclasses.replace(rest, iterations=0)  # rendering steps run
