@@ -120,11 +120,14 @@ def test_presets_hold_and_texture_degenerate_views(name: str) -> None:
     assert sdf.colour_weight == 0.2 and sdf.colour_when == "degenerate"
 
 
-@pytest.mark.parametrize("name", ["folder.yaml", "tum/tum_cpu.yaml"])
+@pytest.mark.parametrize(
+    "name", ["folder.yaml", "tum/tum_cpu.yaml", "sevenscenes/redkitchen_cpu.yaml"]
+)
 def test_sensor_presets_start_from_features_and_map_what_is_new(name: str) -> None:
     """docs/results.md "Starting pose from features" (level where frames come densely,
-    every frame held at every 8th frame of TUM fr1/xyz) and "Synthetic fast yaw" (no
-    worse on any sequence measured, every frame held at 180 degrees per second)."""
+    every frame held at every 8th frame of TUM fr1/xyz), "Synthetic fast yaw" (no
+    worse on any sequence measured, every frame held at 180 degrees per second) and
+    "Live" (7-Scenes replayed in real time lost from the motion model's start)."""
     config = load_config(CONFIGS / name)
     assert config.tracking.start == "features"
     assert config.tracking.observed_only and config.mapping.keyframe_coverage == 0.8
