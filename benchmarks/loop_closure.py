@@ -9,7 +9,8 @@ focal length that much off: odometry drifts) and the sensor flaws ``--depth-nois
 markdown row: ATE, and without alignment (frame 0 starts at its ground truth, and the
 mesh is scored where the run put it) the position error's RMSE, where the camera is
 back at its start and the largest, loops accepted /
-refused / closed, wall time, and with ``--mesh`` the mesh's accuracy and completion
+refused / closed, wall time, with ``--profile N`` a line of each run's position error
+every N frames, and with ``--mesh`` the mesh's accuracy and completion
 against the scene's mesh (``eslam eval``'s, the ``eval`` extra).
 
     python benchmarks/loop_closure.py --out /tmp/loops --focal-error 0.02
@@ -47,11 +48,16 @@ def mesh_cells(run_dir: Path, data: Path) -> str:
     return f" | {metrics['accuracy_cm']:.2f} | {metrics['completion_cm']:.2f}"
 
 
-def row(name: str, run_dir: Path, lap: int, metrics: dict, wall: float) -> str:
-    """One markdown row for the run in ``run_dir`` (module doc), without the mesh."""
+def position_errors(run_dir: Path) -> np.ndarray:
+    """Each frame's position error (cm), frame 0 at its ground truth (no alignment)."""
     estimate = np.loadtxt(run_dir / "trajectory.txt")
     truth = np.loadtxt(run_dir / "trajectory_gt.txt")
-    errors = 100.0 * np.linalg.norm(estimate[:, 1:4] - truth[:, 1:4], axis=1)
+    return 100.0 * np.linalg.norm(estimate[:, 1:4] - truth[:, 1:4], axis=1)
+
+
+def row(name: str, run_dir: Path, lap: int, metrics: dict, wall: float) -> str:
+    """One markdown row for the run in ``run_dir`` (module doc), without the mesh."""
+    errors = position_errors(run_dir)
     back = f"{errors[lap]:.2f}" if lap < len(errors) else "-"
     loops = "-"
     if "loops_accepted" in metrics:
@@ -63,6 +69,13 @@ def row(name: str, run_dir: Path, lap: int, metrics: dict, wall: float) -> str:
         f"| {errors.max():.2f} | {loops} "
         f"| {wall / 60:.1f}"
     )
+
+
+def profile(name: str, run_dir: Path, every: int) -> str:
+    """One line: the run's position error (cm) at frames 0, every, 2 every, ..."""
+    errors = position_errors(run_dir)
+    cells = " ".join(f"{k}:{errors[k]:.2f}" for k in range(0, len(errors), every))
+    return f"{name}: position error (cm) by frame {cells}"
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -77,6 +90,9 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--settings", nargs="+", default=["off", "on"])
     parser.add_argument("--mesh", action="store_true", help="score the meshes (eval extra)")
     parser.add_argument("--threads", type=int, default=1)
+    parser.add_argument(
+        "--profile", type=int, metavar="N", help="also print each run's error every N frames"
+    )
     args = parser.parse_args(argv)
     torch.set_num_threads(args.threads)
     loop = SynthConfig(
@@ -110,6 +126,8 @@ def main(argv: list[str] | None = None) -> None:
             line += mesh_cells(run_dir, data)
         lines.append(line + " |")
         print(lines[-1], flush=True)
+        if args.profile:
+            print(profile(name, run_dir, args.profile), flush=True)
     print("\n".join(lines))
 
 

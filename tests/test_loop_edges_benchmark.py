@@ -1,0 +1,76 @@
+"""benchmarks/loop_edges.py: a loop edge at the truth is closer than a drifted estimate,
+and one the estimate already holds is not; a run without loops gets one line, exit 2."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from eslam.io.trajectory import RUN_TRAJECTORY, RUN_TRAJECTORY_GT, write_tum_trajectory
+from eslam.testing.scripts import load_script
+
+SCRIPT = Path(__file__).resolve().parents[1] / "benchmarks" / "loop_edges.py"
+
+
+def _pose(x: float, yaw_deg: float) -> np.ndarray:
+    angle = np.radians(yaw_deg)
+    pose = np.eye(4)
+    pose[:3, :3] = [
+        [np.cos(angle), 0, np.sin(angle)],
+        [0, 1, 0],
+        [-np.sin(angle), 0, np.cos(angle)],
+    ]
+    pose[0, 3] = x
+    return pose
+
+
+def _run(folder: Path, estimate: np.ndarray, truth: np.ndarray, loops: list[dict]) -> Path:
+    folder.mkdir()
+    times = np.arange(len(truth), dtype=float)
+    write_tum_trajectory(folder / RUN_TRAJECTORY, times, estimate)
+    write_tum_trajectory(folder / RUN_TRAJECTORY_GT, times, truth)
+    (folder / "loops.json").write_text(json.dumps(loops))
+    return folder
+
+
+def test_edges_at_the_truth_are_closer_than_a_drifted_estimate(tmp_path: Path, capsys) -> None:
+    script = load_script(SCRIPT)
+    truth = np.stack([_pose(0.01 * k, 2.0 * k) for k in range(400)])
+    drift = np.stack([_pose(0.012 * k, 2.1 * k) for k in range(400)])
+    exact = np.linalg.inv(truth[0]) @ truth[350]
+    held = np.linalg.inv(drift[100]) @ drift[150]
+    loops = [
+        {"frame": 350, "candidate_frame": 0, "relative_pose": exact.tolist(), "accepted": True},
+        {"frame": 150, "candidate_frame": 100, "relative_pose": held.tolist(), "accepted": True},
+        {"frame": 200, "candidate_frame": 0, "relative_pose": None, "accepted": False},
+    ]
+    run = _run(tmp_path / "on", truth, truth, loops)
+    off = _run(tmp_path / "off", drift, truth, [])
+    errors = script.edge_errors(script.accepted_loops(run), drift, truth)
+    assert errors.shape == (2, 5)
+    (gap, edge_cm, edge_deg, est_cm, est_deg), second = errors
+    assert gap == 350 and edge_cm < 1e-6 and edge_deg < 1e-4
+    assert est_cm > 50 and est_deg > 30
+    assert np.allclose(second[1:3], second[3:5])
+    assert script.main([str(run), "--estimate", str(off)]) == 0
+    out = capsys.readouterr().out
+    assert "| 2 | all |" in out and "| 1 of 2 |" in out and "| 1 | >= 300 |" in out
+
+
+def test_a_run_without_loops_or_of_other_frames_is_refused(tmp_path: Path, capsys) -> None:
+    script = load_script(SCRIPT)
+    truth = np.stack([_pose(0.01 * k, 0.0) for k in range(20)])
+    bare = _run(tmp_path / "bare", truth, truth, [])
+    (bare / "loops.json").unlink()
+    assert script.main([str(bare)]) == 2
+    assert "loops.json: missing" in capsys.readouterr().err
+    empty = _run(tmp_path / "empty", truth, truth, [])
+    assert script.main([str(empty)]) == 2
+    assert "no accepted loop" in capsys.readouterr().err
+    loop = {"frame": 15, "candidate_frame": 0, "relative_pose": np.eye(4).tolist()}
+    run = _run(tmp_path / "run", truth, truth, [dict(loop, accepted=True)])
+    short = _run(tmp_path / "short", truth[:10], truth[:10], [])
+    assert script.main([str(run), "--estimate", str(short)]) == 2
+    assert "10 poses, not 20" in capsys.readouterr().err
