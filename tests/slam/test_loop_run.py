@@ -80,3 +80,37 @@ def test_a_map_rebuilt_after_the_correction_tracks_the_return(
     sequence = ReplicaSequence(there_and_back)
     gt = np.stack([sequence[i].pose_gt for i in range(len(ORDER))])
     assert run.metrics["ate_rmse_cm"] < min(1.0, 0.1 * static_ate_cm(gt))
+
+
+@pytest.mark.slow
+def test_the_global_refinement_moves_frames_with_their_keyframes(
+    there_and_back: Path, tmp_path: Path
+) -> None:
+    """``final_passes``: passes over every keyframe with their poses optimised at the end,
+    timed and logged; every frame moves with the latest keyframe at or before it, and a
+    run resumed after it does not refine again."""
+    plain = ("mapping.loops.enabled=true", "mapping.loops.candidates=0")
+    before = run_slam(demo_config(there_and_back, *plain), tmp_path / "plain")
+    config = demo_config(there_and_back, *plain, "mapping.loops.final_passes=1")
+    after = run_slam(config, tmp_path / "refined")
+    assert "loops_refinement_s" not in before.metrics
+    assert after.metrics["loops_refinement_s"] > 0
+    assert "global refinement: 1 passes over" in (tmp_path / "refined" / "log.txt").read_text()
+    keyframes = [0, 4, 8, 12, 13]  # the demo maps every 4th frame and the last
+    moved = np.abs(after.poses[keyframes[1:]] - before.poses[keyframes[1:]]).max()
+    assert 1e-5 < moved < 0.05  # refined, not thrown away
+    for f in range(len(ORDER)):  # every frame keeps its offset to its keyframe
+        k = max(k for k in keyframes if k <= f)
+        np.testing.assert_allclose(
+            np.linalg.inv(after.poses[k]) @ after.poses[f],
+            np.linalg.inv(before.poses[k]) @ before.poses[f],
+            atol=1e-6,
+        )
+    sequence = ReplicaSequence(there_and_back)
+    gt = np.stack([sequence[i].pose_gt for i in range(len(ORDER))])
+    assert after.metrics["ate_rmse_cm"] < min(1.0, 0.1 * static_ate_cm(gt))
+    again = run_slam(
+        load_config(tmp_path / "refined" / "config.yaml"), tmp_path / "refined", resume=True
+    )
+    np.testing.assert_allclose(again.poses, after.poses, rtol=0, atol=1e-9)
+    assert (tmp_path / "refined" / "log.txt").read_text().count("global refinement") == 1

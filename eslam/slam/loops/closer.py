@@ -17,6 +17,8 @@ after each keyframe is mapped:
    every frame moves with the latest keyframe at or before it.
 4. **The map follows**: the back end fits the field again at the corrected poses
    (``mapping.loops.map``).
+5. **At the end** (``final_passes``, :meth:`LoopCloser.refine`): passes over every
+   keyframe with the poses optimised too, once per run.
 
 State lives in the run's ``components["loops"]`` (loop edges by frame index, the record
 of every candidate, counts), so it is checkpointed, rolled back with a failed frame and
@@ -115,6 +117,26 @@ class LoopCloser:
         if accepted:
             self._close(index, current, state, max(accepted, key=lambda a: a[0]))
         own["seconds"] = own.get("seconds", 0.0) + time.perf_counter() - started
+
+    def refine(self, state: SLAMState, run_passes: Callable[[SLAMState, int], None]) -> None:
+        """The global refinement at the end of a run (``final_passes`` > 0): that many
+        passes over every keyframe with their poses optimised (``run_passes``, the back
+        end's), once per run (a resumed run that already did it does not repeat it),
+        timed (metrics.json ``loops_refinement_s``) and logged."""
+        own = self.own(state)
+        passes = self.config.final_passes
+        if passes <= 0 or own.get("final"):
+            return
+        started = time.perf_counter()
+        run_passes(state, passes)
+        own["final"] = True
+        own["refinement_seconds"] = time.perf_counter() - started
+        self.context.logger.info(
+            "global refinement: %d passes over %d keyframes (poses and map) in %.1f s",
+            passes,
+            len(state.keyframes),
+            own["refinement_seconds"],
+        )
 
     def _verify(self, store: KeyframeStore, current: int, candidate: Candidate) -> IcpResult:
         """ICP of keyframe ``current``'s depth onto the candidate's, from its guess."""
@@ -302,7 +324,8 @@ def anchors(keyframe_frames: tuple[int, ...], count: int) -> np.ndarray:
 
 def loop_metrics(state: SLAMState) -> dict:
     """metrics.json's loop figures: candidates accepted and refused, loops closed, and
-    the seconds loop closure took (search, verification, graph and map refits)."""
+    the seconds loop closure took (search, verification, graph and map refits), and
+    those of the global refinement at the end when it ran."""
     own = state.components.get(COMPONENT)
     if own is None:
         return {}
@@ -313,4 +336,9 @@ def loop_metrics(state: SLAMState) -> dict:
         "loops_rejected": len(entries) - accepted,
         "loops_closed": int(own.get("corrections", 0)),
         "loops_time_s": float(own.get("seconds", 0.0)),
+        **(
+            {"loops_refinement_s": float(own["refinement_seconds"])}
+            if "refinement_seconds" in own
+            else {}
+        ),
     }

@@ -183,10 +183,8 @@ class KeyframeBackEnd:
 
     def finish(self, state: SLAMState, last: Frame | None) -> None:
         self._map_last(state, last)
-        passes = self.context.config.mapping.loops.final_passes
-        if self.loops is not None and passes > 0 and not state.component("loops").get("final"):
-            self.passes.run(state, passes, optimise_poses=True)
-            state.component("loops")["final"] = True
+        if self.loops is not None:
+            self.loops.refine(state, lambda s, passes: self.passes.run(s, passes, True))
 
     def _map_last(self, state: SLAMState, last: Frame | None) -> None:
         if state.last_mapped:
