@@ -123,10 +123,10 @@ class LoopCloser:
         passes over every keyframe with their poses optimised (``run_passes``, the back
         end's), once per run (a resumed run that already did it does not repeat it),
         timed (metrics.json ``loops_refinement_s``) and logged."""
-        own = self.own(state)
         passes = self.config.final_passes
-        if passes <= 0 or own.get("final"):
+        if passes <= 0 or self.own(state).get("final"):
             return
+        own = self.own(state)
         started = time.perf_counter()
         run_passes(state, passes)
         own["final"] = True
