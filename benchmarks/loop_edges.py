@@ -8,7 +8,8 @@ compares both with the ground truth's (RUN's ``trajectory_gt.txt``): the edge, a
 estimate of ``--estimate`` (a finished run of the same frames, typically the same
 config with loop closure off; by default RUN itself, whose trajectory the loops have
 already corrected). Rows: every accepted loop, then by how many frames apart the two
-keyframes are.
+keyframes are; ``--min-inliers F`` keeps only the loops with at least that share of
+inliers (would a stricter gate keep better edges?).
 
     python benchmarks/loop_edges.py RUN_WITH_LOOPS --estimate RUN_WITHOUT
 
@@ -37,8 +38,10 @@ GAPS = ((0, 100), (100, 300), (300, None))
 """Frame gaps the table groups loops by: [low, high) frames apart, None = no limit."""
 
 
-def accepted_loops(run: Path) -> list[tuple[int, int, np.ndarray]]:
-    """(frame, candidate frame, 4x4 relative pose) of each loop ``run`` accepted."""
+def accepted_loops(run: Path, min_inliers: float = 0.0) -> list[tuple[int, int, np.ndarray]]:
+    """(frame, candidate frame, 4x4 relative pose) of each loop ``run`` accepted with at
+    least ``min_inliers`` of its points on the candidate's surface (a stricter gate than
+    the run's ``min_inlier_fraction``, to see whether it would keep better edges)."""
     path = run / "loops.json"
     if not path.is_file():
         raise InputError(path, "missing", "give a run made with mapping.loops.enabled=true")
@@ -47,7 +50,7 @@ def accepted_loops(run: Path) -> list[tuple[int, int, np.ndarray]]:
         return [
             (int(e["frame"]), int(e["candidate_frame"]), np.array(e["relative_pose"], float))
             for e in entries
-            if e["accepted"]
+            if e["accepted"] and e["inlier_fraction"] >= min_inliers
         ]
     except (ValueError, KeyError, TypeError) as error:
         raise InputError(path, f"unreadable ({error})", "give a run's own loops.json") from error
@@ -106,9 +109,12 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n", 1)[0])
     parser.add_argument("run", type=Path, help="a finished run with loop closure on")
     parser.add_argument("--estimate", type=Path, help="the run whose relative poses to judge")
+    parser.add_argument(
+        "--min-inliers", type=float, default=0.0, help="only loops with this inlier share"
+    )
     args = parser.parse_args(argv)
     try:
-        loops = accepted_loops(args.run)
+        loops = accepted_loops(args.run, args.min_inliers)
         for run in {args.run, args.estimate or args.run}:
             if dropped_frames(run):
                 raise InputError(run, "dropped frames", "give a run of recorded frames")

@@ -46,6 +46,8 @@ def test_edges_at_the_truth_are_closer_than_a_drifted_estimate(tmp_path: Path, c
         {"frame": 150, "candidate_frame": 100, "relative_pose": held.tolist(), "accepted": True},
         {"frame": 200, "candidate_frame": 0, "relative_pose": None, "accepted": False},
     ]
+    for entry, inliers in zip(loops, (0.9, 0.7, 0.3), strict=True):
+        entry["inlier_fraction"] = inliers
     run = _run(tmp_path / "on", truth, truth, loops)
     off = _run(tmp_path / "off", drift, truth, [])
     errors = script.edge_errors(script.accepted_loops(run), drift, truth)
@@ -57,6 +59,9 @@ def test_edges_at_the_truth_are_closer_than_a_drifted_estimate(tmp_path: Path, c
     assert script.main([str(run), "--estimate", str(off)]) == 0
     out = capsys.readouterr().out
     assert "| 2 | all |" in out and "| 1 of 2 |" in out and "| 1 | >= 300 |" in out
+    assert [i for i, _, _ in script.accepted_loops(run, min_inliers=0.8)] == [350]
+    assert script.main([str(run), "--estimate", str(off), "--min-inliers", "0.8"]) == 0
+    assert "| 1 | all |" in capsys.readouterr().out
 
 
 def test_a_run_without_loops_or_of_other_frames_is_refused(tmp_path: Path, capsys) -> None:
@@ -70,6 +75,7 @@ def test_a_run_without_loops_or_of_other_frames_is_refused(tmp_path: Path, capsy
     assert script.main([str(empty)]) == 2
     assert "no accepted loop" in capsys.readouterr().err
     loop = {"frame": 15, "candidate_frame": 0, "relative_pose": np.eye(4).tolist()}
+    loop["inlier_fraction"] = 0.9
     run = _run(tmp_path / "run", truth, truth, [dict(loop, accepted=True)])
     short = _run(tmp_path / "short", truth[:10], truth[:10], [])
     assert script.main([str(run), "--estimate", str(short)]) == 2
