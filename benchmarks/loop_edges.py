@@ -118,8 +118,9 @@ def main(argv: list[str] | None = None) -> int:
         for run in {args.run, args.estimate or args.run}:
             if dropped_frames(run):
                 raise InputError(run, "dropped frames", "give a run of recorded frames")
-        _, _, truth = read_run_trajectories(args.run)
-        times, estimate, _ = read_run_trajectories(args.estimate or args.run)
+        times, estimate, truth = read_run_trajectories(args.run)
+        if args.estimate is not None:
+            times, estimate, _ = read_run_trajectories(args.estimate)
         if len(times) != len(truth):
             raise InputError(
                 args.estimate, f"{len(times)} poses, not {len(truth)}", "run the same frames"
