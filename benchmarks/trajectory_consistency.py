@@ -127,6 +127,9 @@ def main(argv: list[str] | None = None) -> None:
         by_start = {i: m for i, m in by_start.items() if np.isfinite(m).all()}
         if gap == args.gaps[0]:
             first_gap_pairs = by_start
+        if not by_start:  # no pair this far apart sees the same surface (e.g. half a lap)
+            rows.append(f"| {gap} | 0 | - | - | - |")
+            continue
         pairs = np.array(list(by_start.values()))
         better = int((pairs[:, 1] < pairs[:, 0]).sum())
         rows.append(

@@ -56,7 +56,7 @@ def test_reports_the_injected_jump(script, tmp_path: Path, capsys) -> None:
     write_tum_trajectory(run / "trajectory.txt", np.arange(len(frames), dtype=float), truth)
     script.main(
         ["--config", str(CONFIG), "--data", str(tmp_path / "seq"), "--run", str(run),
-         "--gaps", "1", "6", "--step", "1", "--every", "2", "--no-append"]
+         "--gaps", "1", "6", "12", "--step", "1", "--every", "2", "--no-append"]
     )  # fmt: skip
     out = capsys.readouterr().out
     steps = out.split("Single steps")[1].split("\n| ")
@@ -70,6 +70,7 @@ def test_reports_the_injected_jump(script, tmp_path: Path, capsys) -> None:
     # Pairs (0, 6) to (4, 10) cross the jump and favour the estimate; (5, 11) lies after
     # it, where both trajectories have the same relative pose (a tie rounding decides).
     assert pairs == "6" and int(better) >= 5
+    assert "| 12 | 0 | - | - | - |" in out  # no pair that far apart: a row, not a crash
     # The ATE errors by place in the mapping cycle (12 frames, 3 per place) make up the ATE.
     cycle = out.split("i mod every |")[1].split("\n\n")[0].splitlines()[2:]
     by_place = np.array([float(row.strip("|").split("|")[4]) for row in cycle])

@@ -61,10 +61,9 @@ SEVENSCENES_COLOUR_CAMERA = ColourCamera(
     fx=525.0, fy=525.0, cx=320.0, cy=239.0, centre=(0.025, 0.0, 0.0)
 )
 """The Kinect v1 colour camera relative to the depth camera of 7-Scenes: the usual
-525-pixel focal length of 7-Scenes colour, its centre 2.5 cm along +x, row 239. On
-redkitchen it doubles the edge alignment of colour against depth (0.150 against
-0.075; ``benchmarks/colour_registration.py``, whose own fit, 527.5 px and 2.38 cm,
-scores 0.153: docs/data.md)."""
+525-pixel focal length of 7-Scenes colour, its centre 2.5 cm along +x, row 239. How
+well it aligns colour with depth on redkitchen, against the raw colour and a fitted
+camera: ``benchmarks/colour_registration.py`` (docs/results.md, "Data checks")."""
 
 ROTATION_TOLERANCE = 1e-2
 """Largest |R^T R - I| entry (and |det R - 1|) of a raw 7-Scenes rotation before it is

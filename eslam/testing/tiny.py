@@ -2,7 +2,7 @@
 
 Coarse planes (0.24 / 0.12 m cells), few rays, samples and iterations. The paper's
 `render` tracker: on planes this coarse the learned TSDF is too rough near surfaces for
-the SDF stage of `hybrid` (0.76 cm ATE against 0.50 cm on the tests' tiny sequence);
+the SDF stage of `hybrid` (it tracks the tests' tiny sequence worse than `render`);
 the trackers have their own tests. The first frame keeps the 60 plain rendering steps
 the tiny runs were tuned with (the demo config's TSDF warm start is tested on its own,
 tests/slam/test_first_frame.py).
