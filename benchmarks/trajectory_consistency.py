@@ -91,10 +91,12 @@ def segment_rows(
         estimate_motion = net_motion(estimate[span], hop)
         inside = [m for i, m in pair_medians.items() if start <= i < end]
         residuals = np.median(np.stack(inside), axis=0) if inside else np.full(2, np.nan)
+        # a hop longer than the segment measures no motion there: no ratio
+        ratio = f"{estimate_motion / truth_motion:.3f}" if truth_motion > 0 else "-"
         rows.append(
             f"| {start}-{end} | {100 * np.sqrt(np.mean(errors[span] ** 2)):.2f} "
             f"| {100 * truth_motion:.1f} | {100 * estimate_motion:.1f} "
-            f"| {estimate_motion / truth_motion:.3f} "
+            f"| {ratio} "
             f"| {1000 * residuals[0]:.2f} | {1000 * residuals[1]:.2f} |"
         )
     return rows

@@ -93,3 +93,6 @@ def test_segment_rows_locate_where_the_estimate_moves_too_far(script) -> None:
     assert cells[0][4] == "1.000" and cells[1][4] == "1.200"
     assert cells[0][2] == "10.0" and cells[1][3] == "12.0"
     assert cells[0][5:] == ["4.00", "5.00"] and cells[1][5:] == ["6.00", "3.00"]
+    # A hop longer than a segment (a long first gap) measures no motion: no ratio.
+    long_hop = script.segment_rows(estimate, truth, errors, {}, length=10, hop=11)
+    assert [row.strip("|").split("|")[4].strip() for row in long_hop] == ["-", "-"]

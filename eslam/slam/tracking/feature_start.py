@@ -5,7 +5,8 @@ centimetres, a few degrees at room depth); the motion model's constant-velocity 
 is that close only while the camera moves smoothly and the frames come densely. Between
 frames far apart in time (a stride, a real-time run that processes a fraction of the
 frames) or through a jerk, the guess is often several centimetres and degrees off
-(measured in docs/tracking.md, "Starting pose"), and the tracker settles on a wrong pose or fails.
+(measured in docs/tracking.md, "Starting pose"), and the tracker settles on a wrong
+pose or fails.
 
 With ``start: features`` each frame's ORB features are matched to a reference image
 whose pose the run has: the previous frame when it was tracked, or when it failed but
