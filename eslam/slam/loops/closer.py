@@ -124,9 +124,11 @@ class LoopCloser:
         end's), once per run (a resumed run that already did it does not repeat it),
         timed (metrics.json ``loops_refinement_s``) and logged."""
         passes = self.config.final_passes
-        if passes <= 0 or self.own(state).get("final"):
+        if passes <= 0:  # off: no loop state is made for it
             return
         own = self.own(state)
+        if own.get("final"):
+            return
         started = time.perf_counter()
         run_passes(state, passes)
         own["final"] = True
