@@ -4,14 +4,15 @@ The room's loop trajectory (``eslam synth --trajectory loop``: laps around the r
 looking outwards, about 250 frames a lap at 1 cm a frame) is rendered with exact ground
 truth, ``--frames`` frames at ``--size``, with ``--focal-error`` (the frames report a
 focal length that much off: odometry drifts) and the sensor flaws ``--depth-noise`` and
-``--missing-depth``. Each ``--settings`` entry (``off`` = the config as it is, ``on`` =
-``mapping.loops.enabled=true``, or any ``key=value,key=value``) is one run and one
-markdown row: ATE, and without alignment (frame 0 starts at its ground truth, and the
-mesh is scored where the run put it) the position error's RMSE, where the camera is
-back at its start and the largest, loops accepted /
-refused / closed, wall time, with ``--profile N`` a line of each run's position error
-every N frames, and with ``--mesh`` the mesh's accuracy and completion
-against the scene's mesh (``eslam eval``'s, the ``eval`` extra).
+``--missing-depth``. Each ``--settings`` entry is one run and one markdown row: ``off``
+(the config as it is), ``on`` (``mapping.loops.enabled=true``) or ``key=value`` entries,
+comma-separated, after either or alone (``on,seed=1``). A row: ATE, and without
+alignment (frame 0 starts at its ground truth, and the mesh is scored where the run put
+it) the position error's RMSE, where the camera is back at its start and the largest,
+loops accepted / refused / closed, wall time; with ``--profile N`` a line of each run's
+position error every N frames; with ``--mesh`` the mesh's accuracy and completion
+against the scene's mesh (``eslam eval``'s, the ``eval`` extra; ``eslam eval RUN
+--gt-mesh DATA/mesh.ply --views V --max-unobserved F`` adds the depth L1).
 
     python benchmarks/loop_closure.py --out /tmp/loops --focal-error 0.02
 
@@ -29,6 +30,7 @@ import numpy as np
 import torch
 
 from eslam.cli.args import image_size
+from eslam.errors import ESLAMError
 from eslam.slam.session import run_slam
 from eslam.synthetic import SynthConfig, write_synthetic_sequence
 from eslam.synthetic.runs import synthetic_run_config
@@ -37,6 +39,12 @@ from eslam.synthetic.trajectory import loop_lap_frames
 from eslam.workflows.demo import DEMO_CONFIG
 
 PRESETS = {"off": (), "on": ("mapping.loops.enabled=true",)}
+
+
+def expand(name: str) -> tuple[str, ...]:
+    """A ``--settings`` entry as overrides: ``off`` and ``on`` (PRESETS) may start a
+    comma list of ``key=value`` entries (``on,seed=1``)."""
+    return tuple(o for item in name.split(",") for o in PRESETS.get(item, (item,)))
 
 
 def mesh_cells(run_dir: Path, data: Path) -> str:
@@ -115,9 +123,14 @@ def main(argv: list[str] | None = None) -> None:
     if args.mesh:
         head, rule = head + " | mesh accuracy (cm) | completion (cm)", rule + "|---:|---:"
     lines = [head + " |", rule + "|"]
-    for index, name in enumerate(args.settings):
-        settings = PRESETS.get(name, tuple(name.split(",")))
-        config = synthetic_run_config(args.config, data, *settings, mesh=args.mesh)
+    try:  # every setting is checked before the first run starts
+        configs = [
+            synthetic_run_config(args.config, data, *expand(name), mesh=args.mesh)
+            for name in args.settings
+        ]
+    except ESLAMError as error:
+        parser.exit(2, f"loop_closure.py: {error}\n")
+    for index, (name, config) in enumerate(zip(args.settings, configs, strict=True)):
         run_dir = args.out / f"run-{index}"
         start = time.perf_counter()
         metrics = run_slam(config, run_dir, overwrite=True).metrics

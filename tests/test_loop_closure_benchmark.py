@@ -28,3 +28,27 @@ def test_errors_are_read_without_alignment(tmp_path: Path) -> None:
     assert line == "off: position error (cm) by frame 0:0.00 10:1.00 20:2.00"
     cells = script.row("off", tmp_path, 20, {"ate_rmse_cm": 0.5}, 60.0).split(" | ")
     assert cells[3:5] == ["2.00", "2.90"]  # back at the start (frame 20), the largest
+
+
+def test_settings_entries_expand_off_and_on() -> None:
+    script = load_script(SCRIPT)
+    assert script.expand("off") == ()
+    assert script.expand("on,seed=1") == ("mapping.loops.enabled=true", "seed=1")
+    assert script.expand("seed=2,mapping.every=4") == ("seed=2", "mapping.every=4")
+
+
+def test_a_bad_setting_stops_before_any_run(tmp_path: Path, capsys) -> None:
+    script = load_script(SCRIPT)
+    data = tmp_path / "data"
+    data.mkdir()
+    (data / "synth.json").write_text('{"bound": [[-1, 1], [-1, 1], [-1, 1]]}')  # as written
+    try:
+        script.main(["--out", str(tmp_path), "--settings", "on", "mapping.no_such_key=1"])
+    except SystemExit as stop:
+        assert stop.code == 2
+    else:
+        raise AssertionError("a bad setting did not stop the script")
+    error = capsys.readouterr().err
+    assert error.startswith("loop_closure.py: ") and "no_such_key" in error
+    assert error.count("\n") == 1
+    assert not (tmp_path / "run-0").exists()
