@@ -610,11 +610,11 @@ class LoopClosureConfig:
     """Width of the loop edges' Cauchy kernel, in sigmas: a loop far outside it hardly
     moves the graph (one false loop cannot bend the trajectory)."""
     map: Literal["refit", "rebuild"] = "refit"
-    """How the map follows a correction: refit = ``refit_passes`` over every keyframe
-    at its corrected pose from the current field; rebuild = a new field, its TSDF
-    regressed on every keyframe at its corrected pose (``rebuild_warm_start``), fitted
-    with the first frame's schedule on the first window, then the refit passes over every
-    keyframe."""
+    """How the map follows a correction: refit = ``refit_passes`` over the keyframes
+    the correction moved, at their corrected poses, from the current field; rebuild = a
+    new field, its TSDF regressed on every keyframe at its corrected pose
+    (``rebuild_warm_start``), fitted with the first frame's schedule on the first
+    window, then the refit passes over every keyframe."""
     rebuild_warm_start: int = 20
     """With ``map: rebuild``: TSDF warm-start steps per keyframe (the first frame's
     ``first_warm_start_points`` each, the keyframes in turn) before the rendering steps;

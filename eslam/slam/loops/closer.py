@@ -263,7 +263,7 @@ class LoopCloser:
         self.context.logger.info(
             "loop closed: frame %d with frame %d (%.0f %% inliers, %.1f mm residual): the "
             "estimate was %.1f cm / %.2f deg off; frame %d moved %.1f cm / %.2f deg; pose "
-            "graph and map refit %.1f s",
+            "graph and map %s %.1f s",
             index,
             frames[candidate.keyframe],
             100 * result.inlier_fraction,
@@ -273,6 +273,7 @@ class LoopCloser:
             index,
             100 * shift,
             turn,
+            self.config.map,
             time.perf_counter() - started,
         )
 
