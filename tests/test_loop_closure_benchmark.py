@@ -6,6 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from eslam.io.trajectory import RUN_TRAJECTORY, RUN_TRAJECTORY_GT, write_tum_trajectory
 from eslam.testing.scripts import load_script
@@ -37,17 +38,16 @@ def test_settings_entries_expand_off_and_on() -> None:
     assert script.expand("seed=2,mapping.every=4") == ("seed=2", "mapping.every=4")
 
 
-def test_a_bad_setting_stops_before_any_run(tmp_path: Path, capsys) -> None:
+def test_a_bad_setting_stops_before_any_run(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     script = load_script(SCRIPT)
     data = tmp_path / "data"
     data.mkdir()
     (data / "synth.json").write_text('{"bound": [[-1, 1], [-1, 1], [-1, 1]]}')  # as written
-    try:
+    with pytest.raises(SystemExit) as stop:
         script.main(["--out", str(tmp_path), "--settings", "on", "mapping.no_such_key=1"])
-    except SystemExit as stop:
-        assert stop.code == 2
-    else:
-        raise AssertionError("a bad setting did not stop the script")
+    assert stop.value.code == 2
     error = capsys.readouterr().err
     assert error.startswith("loop_closure.py: ") and "no_such_key" in error
     assert error.count("\n") == 1
