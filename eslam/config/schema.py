@@ -598,6 +598,13 @@ class LoopClosureConfig:
     odometry_sigma: tuple[float, float] = (0.002, 0.005)
     """Pose-graph noise of the edge between consecutive keyframes: rotation (rad) and
     translation (m) per component."""
+    odometry: Literal["estimate", "icp"] = "estimate"
+    """What the edge between consecutive keyframes measures: estimate = their relative
+    pose as tracked and mapped; icp = the later keyframe's depth registered to the
+    earlier one's (the loops' ICP, from the estimate; measured when a graph is first
+    solved and kept), where it passes the loops' tests (else the estimate's). Measured
+    edges do not hold the tracker's error, so a loop's correction can reach the
+    keyframes between (with ``anchor_sigma: null``)."""
     loop_sigma: tuple[float, float] = (0.002, 0.005)
     """The same for a loop edge."""
     anchor_sigma: tuple[float, float] | None = (0.01, 0.02)
@@ -647,6 +654,8 @@ class LoopClosureConfig:
                 raise ValueError(f"{name} must be in [0, 1), got {getattr(self, name)}")
         if self.map not in ("refit", "rebuild"):
             raise ValueError(f"map must be refit or rebuild, got {self.map!r}")
+        if self.odometry not in ("estimate", "icp"):
+            raise ValueError(f"odometry must be estimate or icp, got {self.odometry!r}")
 
 
 def _pair(value, name: str) -> tuple[float, float]:

@@ -104,6 +104,42 @@ def test_a_drifted_return_is_closed_and_the_error_shrinks() -> None:
     }
 
 
+def test_measured_odometry_takes_out_an_error_the_estimate_holds() -> None:
+    """The drifting estimate above, with a stretch mid-lap also 3 cm off (a step in and
+    a step out, as where the tracker followed a map it had drifted with): the
+    estimate's odometry edges hold the steps, so closing the loop with them leaves the
+    stretch off; the edges measured by ICP (``odometry: icp``, no anchors) do not."""
+    count = LAP + 1
+    shift = np.eye(4)
+    shift[:3, 3] = [0.03, 0.0, 0.0]
+    stretch = range(LAP // 3, LAP // 2)
+    estimates = [_yaw(0.03 * i) @ SEQUENCE[i].pose_gt for i in range(count)]
+    for i in stretch:
+        estimates[i] = shift @ estimates[i]
+    keyframes = {i: SEQUENCE[i] for i in range(0, count, EVERY)}
+    keyframes[LAP] = SEQUENCE[LAP]
+    errors, metrics = {}, {}
+    for odometry in ("estimate", "icp"):
+        closer, state, refits = _closer_and_state(
+            estimates,
+            keyframes,
+            f"mapping.loops.odometry={odometry}",
+            "mapping.loops.anchor_sigma=null",
+        )
+        closer.after_keyframe(LAP, len(state.keyframes) - 1, state)
+        assert len(refits) == 1
+        errors[odometry] = _errors(state, count)
+        metrics[odometry] = loop_metrics(state)
+    held, measured = (errors[o][list(stretch)].mean() for o in ("estimate", "icp"))
+    assert held > 0.02 and measured < 0.5 * held
+    assert np.sqrt(np.mean(errors["icp"] ** 2)) < np.sqrt(np.mean(errors["estimate"] ** 2))
+    assert "loops_odometry_measured" not in metrics["estimate"]
+    kept, refused = (
+        metrics["icp"][k] for k in ("loops_odometry_measured", "loops_odometry_refused")
+    )
+    assert kept + refused == len(keyframes) - 1 and kept > 0.9 * (len(keyframes) - 1)
+
+
 def test_a_look_alike_is_refused_and_nothing_moves() -> None:
     """Half a lap on, the camera looks the other way; its keyframe is given the first
     frame's colour over its own depth: it looks like the start (appearance proposes the

@@ -40,7 +40,14 @@ import torch
 from eslam.slam.context import RunContext
 from eslam.slam.loops.candidates import Candidate, by_appearance, by_pose, far_enough
 from eslam.slam.loops.icp import IcpResult, IcpSettings, register
-from eslam.slam.loops.pose_graph import Edge, carry_poses, import_gtsam, solve_pose_graph
+from eslam.slam.loops.pose_graph import (
+    Edge,
+    anchors,
+    carry_poses,
+    import_gtsam,
+    solve_pose_graph,
+)
+from eslam.slam.loops.verify import refusal
 from eslam.slam.mapping.keyframes import KeyframeStore
 from eslam.slam.places.index import PlaceIndex
 from eslam.slam.state import SLAMState
@@ -143,13 +150,19 @@ class LoopCloser:
     def _verify(self, store: KeyframeStore, current: int, candidate: Candidate) -> IcpResult:
         """ICP of keyframe ``current``'s depth onto the candidate's, from its guess."""
         target = store.poses[candidate.keyframe].detach().cpu().double().numpy()
-        initial = np.linalg.solve(target, candidate.guess)
-        greys = tuple(
-            store.rgb(k, "cpu").mean(dim=-1).double().numpy() for k in (current, candidate.keyframe)
+        return self._register(
+            store, current, candidate.keyframe, np.linalg.solve(target, candidate.guess)
         )
+
+    def _register(
+        self, store: KeyframeStore, source: int, target: int, initial: np.ndarray
+    ) -> IcpResult:
+        """ICP of keyframe ``source``'s depth onto keyframe ``target``'s from
+        ``initial`` (source camera to target camera), with their colours."""
+        greys = tuple(store.rgb(k, "cpu").mean(dim=-1).double().numpy() for k in (source, target))
         return register(
-            store.depth(current, "cpu").numpy(),
-            store.depth(candidate.keyframe, "cpu").numpy(),
+            store.depth(source, "cpu").numpy(),
+            store.depth(target, "cpu").numpy(),
             store.intrinsics,
             initial,
             self.icp,
@@ -186,29 +199,8 @@ class LoopCloser:
         entry["inlier_fraction"] = round(result.inlier_fraction, 4)
         entry["residual_m"] = round(result.residual, 6) if math.isfinite(result.residual) else None
         entry["colour_agreement"] = round(result.colour_agreement, 4)
-        config = self.config
-        if result.inlier_fraction < config.min_inlier_fraction:
-            entry["why_not"] = (
-                f"{result.inlier_fraction:.0%} of the points on the candidate's surface "
-                f"(needs {config.min_inlier_fraction:.0%})"
-            )
-        elif result.residual > config.max_residual:
-            entry["why_not"] = (
-                f"residual {result.residual * 1000:.1f} mm (at most "
-                f"{config.max_residual * 1000:.1f} mm)"
-            )
-        elif result.min_eigenvalue < config.min_eigenvalue:
-            entry["why_not"] = (
-                f"a direction is not constrained (eigenvalue {result.min_eigenvalue:.2g} < "
-                f"{config.min_eigenvalue:.2g}: a plane or a corridor)"
-            )
-        elif not result.colour_agreement >= config.min_colour_agreement:
-            entry["why_not"] = (
-                f"the surfaces fit but {result.colour_agreement:.0%} of their colours agree "
-                f"(needs {config.min_colour_agreement:.0%}): another place of the same shape"
-            )
-        else:
-            entry["accepted"] = True
+        entry["why_not"] = refusal(result, self.config)
+        entry["accepted"] = entry["why_not"] is None
         return entry
 
     def _close(
@@ -240,23 +232,9 @@ class LoopCloser:
             return
         own["last_closed"] = current
         started = time.perf_counter()
-        solution = solve_pose_graph(
-            poses,
-            self._edges(poses, frames, own["edges"]),
-            anchor=anchor_sigmas(self.config.anchor_sigma, metres, degrees),
-        )
-        trajectory = state.trajectory
-        count = state.next_frame
-        before = trajectory.poses[:count].detach().cpu().double().numpy()
-        carried = carry_poses(before, anchors(frames, count), poses, solution.poses)
-        trajectory.set_poses(list(range(count)), torch.from_numpy(carried))
-        shift, turn = pose_difference(poses[current], solution.poses[current])
-        moved = [
-            k
-            for k in range(len(poses))
-            if max(*np.divide(pose_difference(poses[k], solution.poses[k]), REFIT_SHIFT)) >= 1
-        ]
-        self.refit(state, moved)
+        anchor = anchor_sigmas(self.config.anchor_sigma, metres, degrees)
+        solved, moved = self._solve(state, own, anchor)
+        shift, turn = pose_difference(poses[current], solved[current])
         entry["keyframes_refit"] = len(moved)
         own["corrections"] += 1
         entry["closed"] = True
@@ -277,14 +255,46 @@ class LoopCloser:
             time.perf_counter() - started,
         )
 
-    def _edges(self, poses: np.ndarray, frames: tuple[int, ...], loops: list) -> list[Edge]:
-        """Odometry edges between consecutive keyframes (as estimated now) and the loop
-        edges whose keyframes are in the store."""
+    def _solve(
+        self, state: SLAMState, own: dict, anchor: tuple[float, float] | None
+    ) -> tuple[np.ndarray, list[int]]:
+        """Solve the pose graph over the keyframes (priors of sigmas ``anchor``), move
+        every frame with its keyframe and let the map follow; the solved keyframe poses
+        and the keyframes the map was refitted at."""
+        store = state.keyframes
+        poses = store.poses.detach().cpu().double().numpy()
+        solution = solve_pose_graph(poses, self._edges(poses, store, own), anchor=anchor)
+        trajectory = state.trajectory
+        count = state.next_frame
+        before = trajectory.poses[:count].detach().cpu().double().numpy()
+        carried = carry_poses(before, anchors(store.frame_indices, count), poses, solution.poses)
+        trajectory.set_poses(list(range(count)), torch.from_numpy(carried))
+        moved = [
+            k
+            for k in range(len(poses))
+            if max(*np.divide(pose_difference(poses[k], solution.poses[k]), REFIT_SHIFT)) >= 1
+        ]
+        self.refit(state, moved)
+        return solution.poses, moved
+
+    def _edges(self, poses: np.ndarray, store: KeyframeStore, own: dict) -> list[Edge]:
+        """Odometry edges between consecutive keyframes (``mapping.loops.odometry``: as
+        estimated now, or measured by ICP) and the loop edges whose keyframes are in
+        the store."""
+        frames = store.frame_indices
+        measured = self._odometry(poses, store, own)
         rotation, translation = self.config.odometry_sigma
         edges = [
-            Edge(k, k + 1, np.linalg.solve(poses[k], poses[k + 1]), rotation, translation)
+            Edge(
+                k,
+                k + 1,
+                measured.get((frames[k], frames[k + 1]), np.linalg.solve(poses[k], poses[k + 1])),
+                rotation,
+                translation,
+            )
             for k in range(len(poses) - 1)
         ]
+        loops = own["edges"]
         rotation, translation = self.config.loop_sigma
         node = {frame: k for k, frame in enumerate(frames)}
         for a, b, *relative in loops:
@@ -302,6 +312,29 @@ class LoopCloser:
                 )
         return edges
 
+    def _odometry(
+        self, poses: np.ndarray, store: KeyframeStore, own: dict
+    ) -> dict[tuple[int, int], np.ndarray]:
+        """With ``odometry: icp``, the relative pose of each pair of consecutive
+        keyframes (by frame index) measured by ICP of the later one's depth onto the
+        earlier one's, from the estimate: measured once (kept in the loop state) and
+        used where it passes the loops' tests; {} otherwise."""
+        if self.config.odometry != "icp":
+            return {}
+        frames = store.frame_indices
+        record = own.setdefault("odometry", {})
+        for k in range(len(frames) - 1):
+            key = f"{frames[k]}-{frames[k + 1]}"
+            if key not in record:
+                result = self._register(store, k + 1, k, np.linalg.solve(poses[k], poses[k + 1]))
+                passed = refusal(result, self.config) is None
+                record[key] = np.ravel(result.pose).tolist() if passed else None
+        return {
+            (frames[k], frames[k + 1]): np.reshape(record[f"{frames[k]}-{frames[k + 1]}"], (4, 4))
+            for k in range(len(frames) - 1)
+            if record[f"{frames[k]}-{frames[k + 1]}"] is not None
+        }
+
 
 def anchor_sigmas(
     anchor: tuple[float, float] | None, metres: float, degrees: float
@@ -318,27 +351,30 @@ def anchor_sigmas(
     return max(anchor[0], 2 * math.radians(degrees)), max(anchor[1], 2 * metres)
 
 
-def anchors(keyframe_frames: tuple[int, ...], count: int) -> np.ndarray:
-    """(count,) for each frame 0..count-1 the latest keyframe at or before it (frames
-    before the first keyframe: keyframe 0), the node it moves with."""
-    latest = np.searchsorted(np.asarray(keyframe_frames), np.arange(count), side="right") - 1
-    return np.maximum(latest, 0)
-
-
 def loop_metrics(state: SLAMState) -> dict:
     """metrics.json's loop figures: candidates accepted and refused, loops closed, and
-    the seconds loop closure took (search, verification, graph and map refits), and
-    those of the global refinement at the end when it ran."""
+    the seconds loop closure took (search, verification, graph and map refits); with
+    ``odometry: icp`` the odometry edges measured and those refused (the estimate's
+    used); those of the global refinement at the end when it ran."""
     own = state.components.get(COMPONENT)
     if own is None:
         return {}
     entries = own.get("entries", [])
     accepted = sum(1 for e in entries if e["accepted"])
+    odometry = list(own.get("odometry", {}).values())
     return {
         "loops_accepted": accepted,
         "loops_rejected": len(entries) - accepted,
         "loops_closed": int(own.get("corrections", 0)),
         "loops_time_s": float(own.get("seconds", 0.0)),
+        **(
+            {
+                "loops_odometry_measured": sum(1 for o in odometry if o is not None),
+                "loops_odometry_refused": sum(1 for o in odometry if o is None),
+            }
+            if odometry
+            else {}
+        ),
         **(
             {"loops_refinement_s": float(own["refinement_seconds"])}
             if "refinement_seconds" in own

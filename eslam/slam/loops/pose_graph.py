@@ -178,3 +178,10 @@ def carry_poses(
     frames = np.asarray(frames, np.float64)
     moved = np.asarray(after, np.float64) @ np.linalg.inv(np.asarray(before, np.float64))
     return moved[np.asarray(anchor)] @ frames
+
+
+def anchors(keyframe_frames: tuple[int, ...], count: int) -> np.ndarray:
+    """(count,) for each frame 0..count-1 the latest keyframe at or before it (frames
+    before the first keyframe: keyframe 0), the node it moves with."""
+    latest = np.searchsorted(np.asarray(keyframe_frames), np.arange(count), side="right") - 1
+    return np.maximum(latest, 0)

@@ -18,8 +18,7 @@ import torch
 
 from eslam.slam.context import RunContext
 from eslam.slam.cuda_graphs import WindowMapper
-from eslam.slam.loops.closer import anchors
-from eslam.slam.loops.pose_graph import carry_poses
+from eslam.slam.loops.pose_graph import anchors, carry_poses
 from eslam.slam.mapping.keyframe_views import KeyframeViews
 from eslam.slam.mapping.mapper import mapping_schedule
 from eslam.slam.mapping.warm_start import WarmStart, tsdf_warm_start_views
