@@ -9,9 +9,11 @@ estimate of ``--estimate`` (a finished run of the same frames, typically the sam
 config with loop closure off; by default RUN itself, whose trajectory the loops have
 already corrected). Rows: every accepted loop, then by how many frames apart the two
 keyframes are; ``--min-inliers F`` keeps only the loops with at least that share of
-inliers (would a stricter gate keep better edges?).
+inliers (would a stricter gate keep better edges?). ``--odometry`` judges the edges
+between consecutive keyframes that a run with ``mapping.loops.odometry: icp`` measured
+(kept in its ``map.pt``) instead of its loops.
 
-    python benchmarks/loop_edges.py RUN_WITH_LOOPS --estimate RUN_WITHOUT
+    python benchmarks/loop_edges.py RUN_WITH_LOOPS --estimate RUN_WITHOUT [--odometry]
 
 Frame indices in ``loops.json`` are rows of the trajectories: runs of recorded frames
 (a real-time run that dropped frames is refused). Prints the table only.
@@ -27,8 +29,9 @@ from pathlib import Path
 import numpy as np
 
 from eslam.errors import InputError
+from eslam.io.checkpoint import load_checkpoint
 from eslam.io.trajectory import read_run_trajectories
-from eslam.slam.loops.closer import pose_difference
+from eslam.slam.loops.closer import COMPONENT, pose_difference
 from eslam.slam.loops.pose_graph import relative_pose
 
 TIE_CM = 1e-6
@@ -56,6 +59,25 @@ def accepted_loops(run: Path, min_inliers: float = 0.0) -> list[tuple[int, int, 
         raise InputError(path, f"unreadable ({error})", "give a run's own loops.json") from error
 
 
+def measured_odometry(run: Path) -> list[tuple[int, int, np.ndarray]]:
+    """(later frame, earlier frame, 4x4 relative pose) of each odometry edge ``run``
+    measured by ICP and kept (``mapping.loops.odometry: icp``; its map.pt)."""
+    path = run / "map.pt"
+    record = load_checkpoint(path).get("components", {}).get(COMPONENT, {}).get("odometry")
+    if not record:
+        raise InputError(
+            path,
+            "holds no measured odometry edges",
+            "give a run made with mapping.loops.odometry=icp that closed a loop",
+        )
+    edges = []
+    for key, pose in record.items():
+        if pose is not None:  # refused: the run used the estimate's edge there
+            earlier, later = (int(frame) for frame in key.split("-"))
+            edges.append((later, earlier, np.reshape(np.asarray(pose, float), (4, 4))))
+    return edges
+
+
 def edge_errors(
     loops: list[tuple[int, int, np.ndarray]], estimate: np.ndarray, truth: np.ndarray
 ) -> np.ndarray:
@@ -77,7 +99,7 @@ def edge_errors(
 def table(errors: np.ndarray) -> list[str]:
     """The markdown table of ``edge_errors`` rows: all loops, then by gap."""
     lines = [
-        "| loops | frames apart | edge from the truth (cm / deg) "
+        "| edges | frames apart | edge from the truth (cm / deg) "
         "| estimate from the truth (cm / deg) | edge closer (cm) |",
         "|---|---|---:|---:|---:|",
     ]
@@ -112,9 +134,15 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--min-inliers", type=float, default=0.0, help="only loops with this inlier share"
     )
+    parser.add_argument(
+        "--odometry", action="store_true", help="judge the measured odometry edges instead"
+    )
     args = parser.parse_args(argv)
     try:
-        loops = accepted_loops(args.run, args.min_inliers)
+        if args.odometry:
+            loops = measured_odometry(args.run)
+        else:
+            loops = accepted_loops(args.run, args.min_inliers)
         for run in {args.run, args.estimate or args.run}:
             if dropped_frames(run):
                 raise InputError(run, "dropped frames", "give a run of recorded frames")

@@ -1,5 +1,6 @@
 """benchmarks/loop_edges.py: a loop edge at the truth is closer than a drifted estimate,
-and one the estimate already holds is not; a run without loops gets one line, exit 2."""
+and one the estimate already holds is not; measured odometry edges are read from a
+run's map.pt; a run without loops gets one line, exit 2."""
 
 from __future__ import annotations
 
@@ -8,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
+from eslam.io.checkpoint import save_checkpoint
 from eslam.io.trajectory import RUN_TRAJECTORY, RUN_TRAJECTORY_GT, write_tum_trajectory
 from eslam.testing.scripts import load_script
 
@@ -80,3 +82,24 @@ def test_a_run_without_loops_or_of_other_frames_is_refused(tmp_path: Path, capsy
     short = _run(tmp_path / "short", truth[:10], truth[:10], [])
     assert script.main([str(run), "--estimate", str(short)]) == 2
     assert "10 poses, not 20" in capsys.readouterr().err
+
+
+def test_measured_odometry_edges_are_judged_from_the_map(tmp_path: Path, capsys) -> None:
+    """Two edges kept (one at the truth, one off by 3 cm) and one refused (None)."""
+    script = load_script(SCRIPT)
+    truth = np.stack([_pose(0.01 * k, 1.0 * k) for k in range(20)])
+    exact = np.linalg.inv(truth[0]) @ truth[4]
+    off = np.linalg.inv(truth[4]) @ truth[8]
+    off[0, 3] += 0.03
+    record = {"0-4": exact.ravel().tolist(), "4-8": off.ravel().tolist(), "8-12": None}
+    run = _run(tmp_path / "run", truth, truth, [])
+    save_checkpoint(run / "map.pt", {"components": {"loops": {"odometry": record}}})
+    edges = script.measured_odometry(run)
+    assert [(i, j) for i, j, _ in edges] == [(4, 0), (8, 4)]
+    errors = script.edge_errors(edges, truth, truth)
+    assert errors[0, 1] < 1e-6 and abs(errors[1, 1] - 3.0) < 1e-6
+    assert script.main([str(run), "--odometry"]) == 0
+    assert "| 2 | all |" in capsys.readouterr().out
+    save_checkpoint(run / "map.pt", {"components": {}})
+    assert script.main([str(run), "--odometry"]) == 2
+    assert "holds no measured odometry edges" in capsys.readouterr().err
