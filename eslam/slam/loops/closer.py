@@ -12,8 +12,9 @@ after each keyframe is mapped:
    Every candidate and its decision is recorded (``loops.json``).
 3. **Pose graph**: when the best accepted loop disagrees with the estimate by more than
    ``min_correction`` / ``min_correction_deg``, the keyframes' poses are solved with
-   odometry edges (each consecutive pair's relative pose as estimated now) and every
-   loop edge so far (robust), keyframe 0 held (:mod:`eslam.slam.loops.pose_graph`);
+   odometry edges (each consecutive pair's relative pose as estimated now, or with
+   ``odometry: icp`` as ICP measures it) and every loop edge so far (robust),
+   keyframe 0 held (:mod:`eslam.slam.loops.pose_graph`);
    every frame moves with the latest keyframe at or before it.
 4. **The map follows**: the back end fits the field again at the corrected poses
    (``mapping.loops.map``).
