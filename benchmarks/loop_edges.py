@@ -138,6 +138,8 @@ def main(argv: list[str] | None = None) -> int:
         "--odometry", action="store_true", help="judge the measured odometry edges instead"
     )
     args = parser.parse_args(argv)
+    if args.odometry and args.min_inliers:
+        parser.error("--min-inliers gates loops: it does not apply with --odometry")
     try:
         if args.odometry:
             loops = measured_odometry(args.run)

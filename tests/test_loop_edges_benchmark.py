@@ -8,6 +8,7 @@ import json
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from eslam.io.checkpoint import save_checkpoint
 from eslam.io.trajectory import RUN_TRAJECTORY, RUN_TRAJECTORY_GT, write_tum_trajectory
@@ -100,6 +101,9 @@ def test_measured_odometry_edges_are_judged_from_the_map(tmp_path: Path, capsys)
     assert errors[0, 1] < 1e-6 and abs(errors[1, 1] - 3.0) < 1e-6
     assert script.main([str(run), "--odometry"]) == 0
     assert "| 2 | all |" in capsys.readouterr().out
+    with pytest.raises(SystemExit) as stop:
+        script.main([str(run), "--odometry", "--min-inliers", "0.9"])
+    assert stop.value.code == 2 and "--min-inliers" in capsys.readouterr().err
     save_checkpoint(run / "map.pt", {"components": {}})
     assert script.main([str(run), "--odometry"]) == 2
     assert "holds no measured odometry edges" in capsys.readouterr().err

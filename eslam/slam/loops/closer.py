@@ -324,17 +324,16 @@ class LoopCloser:
             return {}
         frames = store.frame_indices
         record = own.setdefault("odometry", {})
+        measured = {}
         for k in range(len(frames) - 1):
             key = f"{frames[k]}-{frames[k + 1]}"
             if key not in record:
                 result = self._register(store, k + 1, k, np.linalg.solve(poses[k], poses[k + 1]))
                 passed = refusal(result, self.config) is None
                 record[key] = np.ravel(result.pose).tolist() if passed else None
-        return {
-            (frames[k], frames[k + 1]): np.reshape(record[f"{frames[k]}-{frames[k + 1]}"], (4, 4))
-            for k in range(len(frames) - 1)
-            if record[f"{frames[k]}-{frames[k + 1]}"] is not None
-        }
+            if record[key] is not None:
+                measured[frames[k], frames[k + 1]] = np.reshape(record[key], (4, 4))
+        return measured
 
 
 def anchor_sigmas(
